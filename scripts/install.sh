@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Install everything this project needs on a fresh Debian bookworm machine, as root.
+# Idempotent: a second run only checks. Used by scripts/demo.sh and scripts/test.sh.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need_apt=()
+command -v simpleFoam >/dev/null 2>&1 || need_apt+=(openfoam)
+command -v slurmctld >/dev/null 2>&1 || need_apt+=(slurm-wlm)
+command -v munged >/dev/null 2>&1 || need_apt+=(munge)
+# off-screen rendering for pyvista/VTK figures
+[ -e /usr/lib/x86_64-linux-gnu/libGL.so.1 ] || [ -e /usr/lib/aarch64-linux-gnu/libGL.so.1 ] || need_apt+=(libgl1)
+dpkg -s libxrender1 >/dev/null 2>&1 || need_apt+=(libxrender1)
+dpkg -s xvfb >/dev/null 2>&1 || need_apt+=(xvfb)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "[install] apt-get install ${need_apt[*]}"
+  apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  echo "[install] creating .venv"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
+if [ ! -f "$stamp" ]; then
+  echo "[install] pip install -e .[test] (pinned)"
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  .venv/bin/python -m pip install -q -e '.[test]'
+  touch "$stamp"
+fi
+echo "[install] OK: $(.venv/bin/python --version), OpenFOAM $(dpkg-query -W -f='${Version}' openfoam 2>/dev/null || echo '?')"
