@@ -1,0 +1,133 @@
+"""Vessel coordinates (tau, theta, rho) of points and their inverse (paper Section 2.2.3, Eqs. 1-4).
+
+Pure functions of a centerline (scipy BSpline, arc-length parametrised on [0, 1]) and its
+parallel-transport frame; vectorised over N points.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import BSpline
+from scipy.spatial import cKDTree
+
+from vcs.frame import ParallelTransportFrame
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class CurveIndex:
+    """Precomputed search structure of a centerline: dense samples, KD-tree, curvature and reach."""
+
+    tau: np.ndarray  # (n,) sample parameters
+    points: np.ndarray  # (n, 3)
+    tree: cKDTree
+    curvature: np.ndarray  # (n,) 1 / mm
+    reach: np.ndarray  # (n,) half the distance to the nearest other part of the curve (inf if none)
+
+    @classmethod
+    def from_curve(cls, curve: BSpline, length: float) -> "CurveIndex":
+        n = int(np.clip(np.ceil(length / 0.5), 256, 4096)) + 1
+        tau = np.linspace(0.0, 1.0, n)
+        pts = curve(tau)
+        return cls(tau, pts, cKDTree(pts), curvature(curve, tau), _reach(pts))
+
+
+def curvature(curve: BSpline, tau) -> np.ndarray:
+    """kappa(tau) = |c' x c''| / |c'|^3; 1/kappa is the local radius of curvature bounding Omega."""
+    d1 = curve.derivative(1)(tau)
+    d2 = curve.derivative(2)(tau)
+    return np.linalg.norm(np.cross(d1, d2), axis=-1) / np.linalg.norm(d1, axis=-1) ** 3
+
+
+def _reach(pts: np.ndarray, max_n: int = 1024) -> np.ndarray:
+    """Half the distance from each sample to the nearest *other* part of the curve.
+
+    For sample i, the other parts are the local minima (over j != i) of |c_i - c_j|. A point
+    within this distance of c_i cannot be as close to another part of the curve (triangle
+    inequality), so its closest point is unique.
+    """
+    step = max(1, int(np.ceil(len(pts) / max_n)))
+    sub = pts[::step]
+    D = np.linalg.norm(sub[:, None, :] - sub[None, :, :], axis=-1)
+    n = len(sub)
+    Dt = D  # rows i, columns j
+    left = np.concatenate([np.full((n, 1), np.inf), Dt[:, :-1]], axis=1)
+    right = np.concatenate([Dt[:, 1:], np.full((n, 1), np.inf)], axis=1)
+    is_min = (Dt <= left) & (Dt <= right)
+    np.fill_diagonal(is_min, False)
+    vals = np.where(is_min, Dt, np.inf).min(axis=1) * 0.5
+    return np.interp(np.arange(len(pts)), np.arange(0, len(pts), step)[: len(vals)], vals)
+
+
+def closest_tau(curve: BSpline, index: CurveIndex, points: np.ndarray, newton_steps: int = 3) -> np.ndarray:
+    """tau = argmin_t |x - c(t)| (paper Eq. 2) for (N, 3) points.
+
+    Global search on the dense samples (KD-tree), refinement on the two adjacent chords, then
+    Newton steps on g(t) = (c(t) - x) . c'(t), clipped to [0, 1].
+    """
+    x = np.asarray(points, float)
+    _, j = index.tree.query(x, workers=-1)
+    n = len(index.tau)
+    best_t = index.tau[j].copy()
+    best_d = np.full(len(x), np.inf)
+    for a_off in (-1, 0):  # chords (j-1, j) and (j, j+1)
+        a = np.clip(j + a_off, 0, n - 2)
+        pa, pb = index.points[a], index.points[a + 1]
+        ab = pb - pa
+        s = np.clip(np.einsum("ij,ij->i", x - pa, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+        d = np.linalg.norm(pa + s[:, None] * ab - x, axis=1)
+        better = d < best_d
+        best_d[better] = d[better]
+        best_t[better] = (index.tau[a] + s * (index.tau[a + 1] - index.tau[a]))[better]
+    t = best_t
+    d1, d2 = curve.derivative(1), curve.derivative(2)
+    for _ in range(newton_steps):
+        r = curve(t) - x
+        c1 = d1(t)
+        c2 = d2(t)
+        g = np.einsum("ij,ij->i", r, c1)
+        gp = np.einsum("ij,ij->i", c1, c1) + np.einsum("ij,ij->i", r, c2)
+        t = np.clip(t - g / np.where(gp > 0, gp, np.inf), 0.0, 1.0)
+    return t
+
+
+def to_vcs(curve: BSpline, frame: ParallelTransportFrame, index: CurveIndex, points: np.ndarray):
+    """Vessel coordinates of points (paper Eqs. 2-4).
+
+    tau = argmin_t |x - c(t)|, rho = |x - c(tau)|, theta = atan2((x - c).v2, (x - c).v1) in
+    [0, 2 pi), counter-clockwise about t from v1.
+
+    Returns
+    -------
+    tau, theta, rho : (N,) float
+    in_omega : (N,) bool
+        False when the point is outside the validity region Omega: rho not below the local radius
+        of curvature 1/kappa(tau), the closest point not unique (rho >= reach), or the point beyond
+        an end plane (its offset from c(0) or c(1) not perpendicular to t).
+    """
+    x = np.asarray(points, float).reshape(-1, 3)
+    tau = closest_tau(curve, index, x)
+    c = curve(tau)
+    t, v1, v2 = frame(tau)
+    d = x - c
+    rho = np.linalg.norm(d, axis=1)
+    theta = np.mod(np.arctan2(np.einsum("ij,ij->i", d, v2), np.einsum("ij,ij->i", d, v1)), TWO_PI)
+    along = np.einsum("ij,ij->i", d, t)
+    tol = 1e-6 * (1.0 + rho)
+    beyond = ((tau <= 0.0) & (along < -tol)) | ((tau >= 1.0) & (along > tol))
+    kappa = np.interp(tau, index.tau, index.curvature)
+    reach = np.interp(tau, index.tau, index.reach)
+    in_omega = (rho * kappa < 1.0) & (rho < reach) & ~beyond
+    return tau, theta, rho, in_omega
+
+
+def to_cartesian(curve: BSpline, frame: ParallelTransportFrame, tau, theta, rho) -> np.ndarray:
+    """x = c(tau) + rho (v1(tau) cos theta + v2(tau) sin theta) (paper Eq. 1 / Eq. 4)."""
+    tau, theta, rho = np.broadcast_arrays(*(np.asarray(a, float) for a in (tau, theta, rho)))
+    shape = tau.shape
+    tau, theta, rho = tau.ravel(), theta.ravel(), rho.ravel()
+    _, v1, v2 = frame(tau)
+    x = curve(np.clip(tau, 0, 1)) + rho[:, None] * (np.cos(theta)[:, None] * v1 + np.sin(theta)[:, None] * v2)
+    return x.reshape(*shape, 3)
