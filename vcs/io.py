@@ -125,6 +125,7 @@ def read_surface(path, units: str = "auto") -> Surface:
         for name in mesh.cell_data.keys()
         if np.asarray(mesh.cell_data[name]).ndim == 1
     }
+    faces, winding = _consistent_winding(vertices, faces)
     if units == "auto":
         extent = float(np.ptp(vertices, axis=0).max())
         units, source = guess_units(extent)
@@ -132,6 +133,21 @@ def read_surface(path, units: str = "auto") -> Surface:
         source = "given"
     vertices = vertices * UNIT_TO_MM[units]
     return Surface(vertices, faces, cell_data, units, source, str(path))
+
+
+def _consistent_winding(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Make triangle winding consistent across shared edges (trimesh.repair.fix_winding).
+
+    Some exporters (e.g. STL from segmentation tools) mix windings; normals, and the star-convexity
+    test of the wall fit, need them consistent. Returns (faces, changed).
+    """
+    import trimesh
+
+    tm = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    if tm.is_winding_consistent:
+        return faces, False
+    trimesh.repair.fix_winding(tm)
+    return np.asarray(tm.faces, dtype=np.int64), True
 
 
 def write_polyline_vtp(path, points: np.ndarray, point_data: dict | None = None) -> None:

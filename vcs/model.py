@@ -77,6 +77,7 @@ class VesselCoordinateSystem:
         lumen = voxelize(cv, cf, h)
         if not lumen.inside.any():
             raise VCSInputError("the surface encloses no voxel of the lumen; check the units (--units) and that it is a tube")
+        lumen = _wall_distance(lumen, vertices, faces[ends.wall_mask])
         t_vox = time.perf_counter()
 
         inlet, outlet = ends.inlet, ends.outlet
@@ -196,12 +197,22 @@ def _recentre(curve, pts, w, p0, p1, n_knots, n_bins=None):
     tsum = np.bincount(b, w * ok, minlength=n_bins)
     tmean = np.bincount(b, w * ok * tau, minlength=n_bins) / np.where(tsum > 0, tsum, 1)
     cnt = np.bincount(b, ok.astype(float), minlength=n_bins)
-    good = (cnt >= 12) & (np.linalg.cond(A + 1e-300 * np.eye(5)) < 1e8)
+    # a bin votes only when its wall points surround the curve (all 8 theta octants present):
+    # bins cut by an oblique end plane or a gap would give a biased centre
+    octant = np.minimum((theta / (np.pi / 4)).astype(int), 7)
+    cover = np.zeros((n_bins, 8), bool)
+    cover[b[ok], octant[ok]] = True
+    good = (cnt >= 12) & cover.all(axis=1)
+    good[good] &= np.linalg.cond(A[good]) < 1e8
     coef = np.zeros((n_bins, 5))
     coef[good] = np.linalg.solve(A[good], y[good][..., None])[..., 0]
-    tb = tmean[good]
+    # bins that do not vote keep the current curve, so the refit is constrained everywhere
+    tb = np.where(good, tmean, (np.arange(n_bins) + 0.5) / n_bins)
     _, v1, v2 = vcs.frame(tb)
-    shift = coef[good, 1:2] * v1 + coef[good, 2:3] * v2
+    shift = (coef[:, 1:2] * v1 + coef[:, 2:3] * v2) * good[:, None]
+    size = np.linalg.norm(shift, axis=1, keepdims=True)
+    cap = 0.25 * np.abs(coef[:, :1])  # never move by more than a quarter of the local radius per step
+    shift *= np.minimum(1.0, cap / np.maximum(size, 1e-300))
     new = curve(tb) + shift
     order = np.argsort(tb)
     fitted = fit_centerline(np.vstack([p0, new[order], p1]), n_knots)
@@ -219,6 +230,38 @@ def _end_report(e: End) -> dict:
         "radius_mm": e.radius,
         "source": e.source,
     }
+
+
+def _wall_distance(lumen: VoxelLumen, vertices: np.ndarray, faces: np.ndarray) -> VoxelLumen:
+    """Replace the voxel distance by the distance to the *wall* only (end caps are not walls).
+
+    With caps counted as walls the path near an end is pushed only by the cap and wanders
+    sideways, giving hooks at the ends of the centerline. Distances are to wall samples
+    (vertices, edge midpoints, centroids, and a finer barycentric grid on triangles larger than
+    a voxel), via a KD-tree.
+    """
+    from scipy.spatial import cKDTree
+
+    tri = vertices[faces]
+    samples = [vertices[np.unique(faces)], tri.mean(axis=1), 0.5 * (tri[:, 0] + tri[:, 1]),
+               0.5 * (tri[:, 1] + tri[:, 2]), 0.5 * (tri[:, 2] + tri[:, 0])]
+    edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    big = edge > lumen.h
+    if big.any():
+        n = int(min(np.ceil(edge[big].max() / (0.5 * lumen.h)), 24))
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        w1, w2 = i[keep] / n, j[keep] / n
+        w0 = 1 - w1 - w2
+        tb = tri[big]
+        samples.append((w0[None, :, None] * tb[:, None, 0] + w1[None, :, None] * tb[:, None, 1]
+                        + w2[None, :, None] * tb[:, None, 2]).reshape(-1, 3))
+    tree = cKDTree(np.concatenate(samples))
+    ijk = np.argwhere(lumen.inside)
+    d, _ = tree.query(lumen.centers(ijk), workers=-1)
+    dist = np.zeros_like(lumen.distance)
+    dist[tuple(ijk.T)] = np.maximum(d, 1e-3 * lumen.h)
+    return VoxelLumen(lumen.inside, dist, lumen.origin, lumen.h)
 
 
 def _interp_distance(lumen: VoxelLumen, pts: np.ndarray) -> np.ndarray:

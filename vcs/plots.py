@@ -1,0 +1,26 @@
+"""Figures (matplotlib, Agg backend: headless)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def residual_map(wall_fit, path, title: str | None = None) -> None:
+    """Residual r(p) (Eq. 11) over the (tau, theta) plane, like the paper's Fig. 4."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.2), dpi=120)
+    u = wall_fit.used
+    sc = ax.scatter(wall_fit.tau[u], wall_fit.theta[u], c=wall_fit.residual[u], s=2, cmap="viridis")
+    ax.scatter(wall_fit.tau[~u], wall_fit.theta[~u], c="lightgrey", s=1, label="not used")
+    ax.set_xlabel("tau")
+    ax.set_ylabel("theta (rad)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 2 * np.pi)
+    fig.colorbar(sc, ax=ax, label="residual (mm)")
+    ax.set_title(title or f"wall residuals (mean {np.nanmean(wall_fit.residual[u]):.3f} mm)")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
