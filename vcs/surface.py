@@ -1,0 +1,253 @@
+"""The model's wall as a closed triangle mesh (paper Eq. 8) and measurement grids.
+
+x(tau, theta) = c(tau) + rho_w(tau, theta) (v1(tau) cos theta + v2(tau) sin theta) on a regular
+tau-theta grid, optional straight flow extensions, flat caps; multi-solid STL for snappyHexMesh.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from vcs.errors import VCSInputError
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class WallMesh:
+    """Closed, outward-oriented triangle mesh: (N, 3) vertices (mm), (M, 3) faces and the solid
+    (0 wall, 1 inlet, 2 outlet) of each face."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    solid: np.ndarray
+
+    SOLIDS = ("wall", "inlet", "outlet")
+
+
+def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
+    """Two triangles per quad of a (n_rows, n_theta) periodic-in-theta vertex grid."""
+    idx = np.arange(n_rows * n_theta).reshape(n_rows, n_theta) + offset
+    a, b = idx[:-1], idx[1:]
+    a2, b2 = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
+    t1 = np.stack([a, a2, b2], -1).reshape(-1, 3)
+    t2 = np.stack([a, b2, b], -1).reshape(-1, 3)
+    return np.concatenate([t1, t2])
+
+
+def _cap(ring: np.ndarray, center: np.ndarray, normal: np.ndarray, offset: int):
+    """Triangulate a flat, star-shaped cap bounded by ``ring`` (n, 3) with near-equilateral
+    triangles: interior points on a hexagonal lattice + Delaunay, boundary edges kept as given."""
+    n = len(ring)
+    e1 = ring[0] - center
+    e1 -= (e1 @ normal) * normal
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    b2 = np.column_stack([(ring - center) @ e1, (ring - center) @ e2])
+    spacing = np.linalg.norm(np.diff(np.vstack([b2, b2[:1]]), axis=0), axis=1).mean()
+    r_max = np.linalg.norm(b2, axis=1).max()
+    m = int(np.ceil(r_max / spacing)) + 1
+    i, j = np.meshgrid(np.arange(-m, m + 1), np.arange(-m, m + 1), indexing="ij")
+    lat = np.column_stack([(i + 0.5 * j).ravel() * spacing, (j * np.sqrt(3) / 2).ravel() * spacing])
+    # keep lattice points well inside the boundary (star-shaped: compare radii at the same angle)
+    ang_b = np.arctan2(b2[:, 1], b2[:, 0])
+    order = np.argsort(ang_b)
+    ang_s = np.concatenate([ang_b[order] - TWO_PI, ang_b[order], ang_b[order] + TWO_PI])
+    rad_s = np.tile(np.linalg.norm(b2, axis=1)[order], 3)
+    r_lat = np.linalg.norm(lat, axis=1)
+    r_bnd = np.interp(np.arctan2(lat[:, 1], lat[:, 0]), ang_s, rad_s)
+    lat = lat[r_lat < r_bnd - 0.7 * spacing]
+    pts2 = np.vstack([b2, lat])
+    tri = Delaunay(pts2).simplices
+    # drop triangles outside the boundary polygon (centroid radius beyond the boundary)
+    cen = pts2[tri].mean(axis=1)
+    r_c = np.linalg.norm(cen, axis=1)
+    inside = r_c < np.interp(np.arctan2(cen[:, 1], cen[:, 0]), ang_s, rad_s)
+    tri = tri[inside]
+    # all boundary edges must be present, otherwise the cap is not watertight
+    bedges = {tuple(sorted((k, (k + 1) % n))) for k in range(n)}
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    present = {tuple(x) for x in e.tolist()}
+    if not bedges <= present:
+        raise VCSInputError("could not triangulate a flat cap of the wall; increase --n-theta or check the model")
+    verts3 = center + lat[:, :1] * e1 + lat[:, 1:] * e2
+    idx = np.where(tri < n, tri + offset[0], tri - n + offset[1])
+    return verts3, idx
+
+
+def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
+              extend_inlet: float = 0.0, extend_outlet: float = 0.0) -> WallMesh:
+    """Eq. 8 wall on a regular tau-theta grid, closed by flat caps, outward-oriented.
+
+    Parameters
+    ----------
+    model : VesselModel (with a wall model)
+    n_tau : number of tau intervals; default gives square quads (axial step = mean arc step).
+    n_theta : vertices around the circumference.
+    extend_inlet, extend_outlet : straight flow extensions, in diameters of the end section,
+        along -t(0) and +t(1), keeping the end cross-section shape.
+    """
+    if model.wall is None:
+        raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
+    if n_theta < 8:
+        raise VCSInputError(f"--n-theta {n_theta} is too small; use at least 8")
+    vcs = model.vcs
+    theta = np.linspace(0, TWO_PI, n_theta, endpoint=False)
+    r_mean = float(model.wall(np.linspace(0, 1, 50)[:, None], theta[None, :]).mean())
+    if r_mean <= 0:
+        raise VCSInputError("the wall model has a non-positive mean radius; refit the model")
+    step = TWO_PI * r_mean / n_theta
+    if n_tau is None:
+        n_tau = max(4, int(round(vcs.length / step)))
+    tau = np.linspace(0, 1, n_tau + 1)
+    rows = [model.surface_points(tau[:, None], theta[None, :])]
+    ends = []
+    for tau_e, ext, sign in ((0.0, extend_inlet, -1.0), (1.0, extend_outlet, 1.0)):
+        t, v1, v2 = vcs.frame(np.array([tau_e]))
+        rw = model.wall(np.full(n_theta, tau_e), theta)
+        section = vcs.curve(tau_e) + rw[:, None] * (np.cos(theta)[:, None] * v1 + np.sin(theta)[:, None] * v2)
+        length = ext * 2.0 * rw.mean()
+        n_ext = int(round(length / step)) if ext > 0 else 0
+        s = np.linspace(0, length, n_ext + 1)[1:]
+        ends.append((section, t[0] * sign, s))
+    (sec0, d0, s0), (sec1, d1, s1) = ends
+    ext_in = sec0[None] + s0[::-1, None, None] * d0[None, None]  # farthest first
+    ext_out = sec1[None] + s1[:, None, None] * d1[None, None]
+    grid = np.concatenate([ext_in, rows[0], ext_out], axis=0)
+    n_rows = len(grid)
+    verts = grid.reshape(-1, 3)
+    faces = _grid_faces(n_rows, n_theta)
+    solid = np.zeros(len(faces), np.int8)
+    all_v, all_f, all_s = [verts], [faces], [solid]
+    n_v = len(verts)
+    for k, (row, d) in enumerate(((0, d0), (n_rows - 1, d1))):
+        ring = grid[row]
+        s_end = (s0 if k == 0 else s1)
+        center = vcs.curve(float(k)) + (s_end[-1] if len(s_end) else 0.0) * d
+        v_cap, f_cap = _cap(ring, center, d, (row * n_theta, n_v))
+        all_v.append(v_cap)
+        all_f.append(f_cap)
+        all_s.append(np.full(len(f_cap), k + 1, np.int8))
+        n_v += len(v_cap)
+    V = np.concatenate(all_v)
+    F = np.concatenate(all_f)
+    S = np.concatenate(all_s)
+    F = _orient_outward(V, F)
+    return WallMesh(V, F, S)
+
+
+def _orient_outward(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Make every face consistent with its neighbours and the enclosed volume positive."""
+    import trimesh  # mesh utilities: consistent winding
+
+    tm = trimesh.Trimesh(V, F, process=False, validate=False)
+    if not tm.is_winding_consistent:
+        trimesh.repair.fix_winding(tm)
+    F = np.asarray(tm.faces)
+    if signed_volume(V, F) < 0:
+        F = F[:, ::-1]
+    return F
+
+
+def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    tri = V[F]
+    return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
+
+
+def write_multisolid_stl(mesh: WallMesh, path, scale: float = 1.0) -> None:
+    """ASCII STL with one solid per patch name (what snappyHexMesh needs for patch names)."""
+    V = mesh.vertices * scale
+    with open(path, "w") as fh:
+        for k, name in enumerate(WallMesh.SOLIDS):
+            F = mesh.faces[mesh.solid == k]
+            tri = V[F]
+            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+            fh.write(f"solid {name}\n")
+            block = np.concatenate([n[:, None], tri], axis=1).reshape(-1, 12)
+            fmt = ("facet normal {:.9e} {:.9e} {:.9e}\n outer loop\n  vertex {:.9e} {:.9e} {:.9e}\n"
+                   "  vertex {:.9e} {:.9e} {:.9e}\n  vertex {:.9e} {:.9e} {:.9e}\n endloop\nendfacet\n")
+            fh.write("".join(fmt.format(*row) for row in block.tolist()))
+            fh.write(f"endsolid {name}\n")
+
+
+@dataclass(frozen=True)
+class MeasurementGrid:
+    """Hexahedral grid of the lumen in (tau, theta, rho_n): ``points`` (N, 3) mm, ``cells``
+    (C, 8) point indices (VTK hexahedron order), and the VCS coordinates of every point."""
+
+    points: np.ndarray
+    cells: np.ndarray
+    tau: np.ndarray
+    theta: np.ndarray
+    rho_n: np.ndarray
+
+
+def _section_pattern(n_theta: int, n_rho: int, scheme: str):
+    """2-D cross-section pattern: (P, 2) points in the unit disk and (Q, 4) quads.
+
+    ``cylindrical``: polar rings rho_n = k / n_rho (k = 0 collapses to the axis: degenerate quads
+    there, as in the paper's grid). ``ogrid``: a Cartesian core square (half-width 0.5 / sqrt 2,
+    n_theta / 4 cells a side) blended ring by ring into the circle rho_n = 1, no degenerate cell.
+    """
+    if scheme == "cylindrical":
+        th = np.linspace(0, TWO_PI, n_theta, endpoint=False)
+        r = np.linspace(0, 1, n_rho + 1)
+        P = (r[:, None, None] * np.stack([np.cos(th), np.sin(th)], -1)[None]).reshape(-1, 2)
+        idx = np.arange((n_rho + 1) * n_theta).reshape(n_rho + 1, n_theta)
+        a, b = idx[:-1], idx[1:]
+        Q = np.stack([a, b, np.roll(b, -1, 1), np.roll(a, -1, 1)], -1).reshape(-1, 4)  # CCW about t
+        return P, Q
+    if scheme != "ogrid":
+        raise VCSInputError(f"unknown grid scheme '{scheme}'; use cylindrical or ogrid")
+    if n_theta % 4:
+        raise VCSInputError(f"--n-theta {n_theta} must be a multiple of 4 for the ogrid scheme")
+    m = n_theta // 4
+    half = 0.5 / np.sqrt(2.0)
+    g = np.linspace(-half, half, m + 1)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    core = np.column_stack([X.ravel(), Y.ravel()])
+    cid = np.arange((m + 1) ** 2).reshape(m + 1, m + 1)
+    Qc = np.stack([cid[:-1, :-1], cid[1:, :-1], cid[1:, 1:], cid[:-1, 1:]], -1).reshape(-1, 4)
+    # boundary of the core, counter-clockwise from (half, -half) ... as a ring of 4 m points
+    ring_ids = np.concatenate([cid[m, :m], cid[m:0:-1, m], cid[0, m:0:-1], cid[:m, 0]])
+    sq = core[ring_ids]
+    ang = np.arctan2(sq[:, 1], sq[:, 0])
+    circ = np.column_stack([np.cos(ang), np.sin(ang)])
+    n_out = max(1, n_rho - n_rho // 2)
+    P = [core]
+    prev = ring_ids
+    Q = [Qc]
+    start = len(core)
+    for k in range(1, n_out + 1):
+        s = k / n_out
+        ring = (1 - s) * sq + s * circ
+        ids = start + np.arange(len(ring))
+        P.append(ring)
+        Q.append(np.stack([prev, ids, np.roll(ids, -1), np.roll(prev, -1)], -1))  # CCW about t
+        prev, start = ids, start + len(ring)
+    return np.concatenate(P), np.concatenate(Q)
+
+
+def measurement_grid(model, *, n_tau: int = 64, n_theta: int = 32, n_rho: int = 8,
+                     scheme: str = "cylindrical") -> MeasurementGrid:
+    """The regular (tau, theta, rho_n) grid mapped through the model (paper Section 2.4.2):
+    x = c(tau) + rho_n rho_w(tau, theta) (v1 cos theta + v2 sin theta)."""
+    if model.wall is None:
+        raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
+    if min(n_tau, n_theta, n_rho) < 1 or n_theta < 4:
+        raise VCSInputError("grid sizes must be positive (n_theta >= 4)")
+    P, Q = _section_pattern(n_theta, n_rho, scheme)
+    rho_n = np.linalg.norm(P, axis=1)
+    theta = np.mod(np.arctan2(P[:, 1], P[:, 0]), TWO_PI)
+    tau = np.linspace(0, 1, n_tau + 1)
+    T = np.repeat(tau, len(P))
+    TH = np.tile(theta, len(tau))
+    RN = np.tile(rho_n, len(tau))
+    pts = model.vcs.to_cartesian(T, TH, RN * model.wall(T, TH))
+    n = len(P)
+    layer = np.arange(n_tau)[:, None, None] * n
+    cells = np.concatenate([Q[None] + layer, Q[None] + layer + n], axis=2).reshape(-1, 8)
+    return MeasurementGrid(pts, cells, T, TH, RN)
