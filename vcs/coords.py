@@ -115,7 +115,7 @@ def to_vcs(curve: BSpline, frame: ParallelTransportFrame, index: CurveIndex, poi
     rho = np.linalg.norm(d, axis=1)
     theta = np.mod(np.arctan2(np.einsum("ij,ij->i", d, v2), np.einsum("ij,ij->i", d, v1)), TWO_PI)
     along = np.einsum("ij,ij->i", d, t)
-    tol = 1e-6 + 0.02 * rho  # points on an end plane tilted by up to ~1 degree still count as inside
+    tol = 1e-9 * (1.0 + rho)
     beyond = ((tau <= 0.0) & (along < -tol)) | ((tau >= 1.0) & (along > tol))
     kappa = np.interp(tau, index.tau, index.curvature)
     reach = np.interp(tau, index.tau, index.reach)

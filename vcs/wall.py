@@ -180,6 +180,12 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
     reason = np.full(len(vertices), -1)
     reason[used_v] = 0
     at_end = (t_ <= 0) | (t_ >= 1)
+    # vertices of the end rings lie on the end planes, which may be tilted by a degree or so
+    # against t(0)/t(1): they are kept when within 2% of rho of the plane through c(0)/c(1)
+    t_end, _, _ = vcs.frame(t_)
+    along = np.abs(np.einsum("ij,ij->i", vertices[used_v] - vcs.curve(t_), t_end))
+    on_ring = at_end & (along <= 0.02 * r_) & (r_ * np.interp(t_, vcs.index.tau, vcs.index.curvature) < 1)
+    om = om | on_ring
     reason[used_v[~om & at_end]] = 1
     reason[used_v[~om & ~at_end]] = 2
 
