@@ -13,7 +13,11 @@ Nothing system-wide is touched:
 * ``slurmctld``/``slurmd`` use free TCP ports chosen at start, and keep
   StateSaveLocation, SlurmdSpoolDir, logs and pid files in the work dir;
 * clients (sbatch, squeue, sinfo, scontrol, srun, and Snakemake's SLURM
-  executor plugin) find the cluster through ``SLURM_CONF`` in ``cluster.env``.
+  executor plugin) find the cluster through ``SLURM_CONF`` in ``cluster.env``;
+* exception: while the cluster runs, ``/run/slurm/conf`` is a symlink to the
+  run dir (only created if neither it nor /etc/slurm/slurm.conf exists),
+  because Snakemake's jobstep executor strips SLURM_CONF before its nested
+  ``srun`` inside each job (see ``_link_client_conf``).
 
 Usage::
 
@@ -37,6 +41,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import ctypes
+import fcntl
 import os
 import shutil
 import signal
@@ -83,6 +88,9 @@ class SlurmCluster:
     real_memory_mb: int = 0
     procs: dict = field(default_factory=dict)  # name -> Popen
     logs: dict = field(default_factory=dict)  # name -> Path
+
+    conf_link: Path | None = None  # /run/slurm/conf link we created (see _link_client_conf)
+    nested_srun_problem: str | None = None  # why srun inside jobs cannot reach us
 
     def procs_ids(self) -> list[int]:
         return [p.pid for p in self.procs.values()]
@@ -194,33 +202,61 @@ def _kill_pid(pid: int, marker: str, timeout: float = 10) -> None:
 _registry_lock = threading.Lock()
 
 
-def _registry_read() -> list[tuple[int, str]]:
+@contextlib.contextmanager
+def _registry_locked():
+    """Thread + inter-process lock around the registry file."""
+    with _registry_lock, open(f"{REGISTRY}.lock", "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _registry_read() -> list[tuple[int, int, str]]:
+    """Entries (daemon pid, owner pid = the test process, marker = run dir)."""
     entries = []
     with contextlib.suppress(OSError):
         for line in REGISTRY.read_text().splitlines():
-            pid, _, marker = line.partition(" ")
-            if pid.isdigit() and marker:
-                entries.append((int(pid), marker))
+            parts = line.split(" ", 2)
+            if len(parts) == 3 and parts[0].isdigit() and parts[1].isdigit():
+                entries.append((int(parts[0]), int(parts[1]), parts[2]))
     return entries
 
 
 def _registry_write(entries) -> None:
     with contextlib.suppress(OSError):
         if entries:
-            REGISTRY.write_text("".join(f"{p} {m}\n" for p, m in entries))
+            REGISTRY.write_text("".join(f"{p} {o} {m}\n" for p, o, m in entries))
         else:
             REGISTRY.unlink(missing_ok=True)
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def kill_stale_daemons() -> None:
-    """Kill daemons a previous (crashed) run registered and left behind."""
-    with _registry_lock:
-        entries = _registry_read()
-        live_ours = {id_ for c in _ACTIVE.values() for id_ in c.procs_ids()} if _ACTIVE else set()
+    """Kill daemons that a previous, now dead, test process left behind.
+
+    Daemons of a concurrently running test process (owner alive) are kept.
+    Only processes listed in the registry whose command line still contains
+    their run dir are signalled.
+    """
+    with _registry_locked():
         keep = []
-        for pid, marker in entries:
-            if pid in live_ours:
-                keep.append((pid, marker))
+        for pid, owner, marker in _registry_read():
+            if owner != os.getpid() and _alive(owner):
+                keep.append((pid, owner, marker))
+                continue
+            if owner == os.getpid() and any(pid in c.procs_ids() for c in _ACTIVE.values()):
+                keep.append((pid, owner, marker))
                 continue
             _kill_pid(pid, marker)
             if marker.startswith(f"/tmp/{MARKER}"):  # its run dir is garbage now
@@ -229,15 +265,60 @@ def kill_stale_daemons() -> None:
 
 
 def _register(pid: int, marker: str) -> None:
-    with _registry_lock:
-        entries = _registry_read()
-        entries.append((pid, marker))
-        _registry_write(entries)
+    with _registry_locked():
+        _registry_write(_registry_read() + [(pid, os.getpid(), marker)])
 
 
 def _unregister(pids) -> None:
-    with _registry_lock:
-        _registry_write([(p, m) for p, m in _registry_read() if p not in set(pids)])
+    pids = set(pids)
+    with _registry_locked():
+        _registry_write([e for e in _registry_read() if e[0] not in pids])
+
+
+# Slurm clients without SLURM_CONF look at /etc/slurm/slurm.conf, then at
+# /run/slurm/conf/slurm.conf (the configless-slurmd cache link). The Snakemake
+# jobstep executor (snakemake-executor-plugin-slurm-jobstep 0.6.1) drops every
+# SLURM_* variable except job identity ones -- SLURM_CONF included -- before its
+# nested `srun`, so inside a job srun would find no config. Hence, while the
+# cluster runs, /run/slurm/conf points at our run dir (only if no real slurm
+# config exists on this machine).
+CLIENT_CONF_LINK = Path("/run/slurm/conf")
+SYSTEM_CONF = Path("/etc/slurm/slurm.conf")
+
+
+def _link_client_conf(cluster: "SlurmCluster") -> None:
+    with _registry_locked():
+        if SYSTEM_CONF.exists():
+            cluster.nested_srun_problem = (
+                f"{SYSTEM_CONF} exists: srun inside Snakemake SLURM jobs (which loses "
+                "SLURM_CONF) would talk to that cluster, not the test cluster")
+            return
+        link = CLIENT_CONF_LINK
+        if link.is_symlink():
+            target = os.readlink(link)
+            if target.startswith(f"/tmp/{MARKER}") and not Path(target, "slurm.conf").exists():
+                link.unlink()  # left behind by a crashed run
+        if link.exists() or link.is_symlink():
+            cluster.nested_srun_problem = (
+                f"{link} is in use (another test cluster or a configless slurmd): "
+                "srun inside Snakemake SLURM jobs cannot find this cluster's config")
+            return
+        link.parent.mkdir(parents=True, exist_ok=True)
+        link.symlink_to(cluster.rundir)
+        cluster.conf_link = link
+
+
+def _unlink_client_conf(cluster: "SlurmCluster") -> None:
+    link = cluster.conf_link
+    if link is None:
+        return
+    with _registry_locked():
+        with contextlib.suppress(OSError):
+            if link.is_symlink() and os.readlink(link) == str(cluster.rundir):
+                link.unlink()
+        with contextlib.suppress(OSError):
+            link.parent.rmdir()  # only if empty
+    cluster.conf_link = None
 
 
 def _munge_key(path: Path) -> None:
@@ -370,6 +451,7 @@ def start_cluster(workdir: Path, timeout: float = 90) -> SlurmCluster:
               timeout, "slurmctld answering 'scontrol ping'")
         _spawn(cluster, "slurmd", ["slurmd", "-D", "-f", str(run_conf), "-N", nodename])
         _wait_node_idle(cluster, timeout)
+        _link_client_conf(cluster)
     except BaseException:
         tails = cluster.log_tails()
         stop_cluster(cluster)
@@ -455,6 +537,7 @@ def stop_cluster(cluster: SlurmCluster, timeout: float = 15) -> None:
         pid = int(pid_dir.name)
         if pid != os.getpid() and str(cluster.rundir) in _cmdline(pid):
             _kill_pid(pid, str(cluster.rundir), timeout=5)
+    _unlink_client_conf(cluster)
     _unregister([p.pid for p in cluster.procs.values()])
     cluster.procs.clear()
     _ACTIVE.pop(id(cluster), None)
