@@ -1,0 +1,337 @@
+"""Resample a finished OpenFOAM case onto the vessel's regular (tau, theta, rho_n) grid.
+
+The measurement grid of a patient (paper Section 2.4.2: every vessel gets the same number of
+samples at VCS-corresponding places): tau in [0, 1] (``n_tau`` values, both ends included),
+theta = 2 pi j / n_theta, rho_n in [0, 1] (``n_rho`` values, axis and wall included), at
+
+    x(tau, theta, rho_n) = c(tau) + rho_n rho_w(tau, theta) (v1 cos theta + v2 sin theta)   (Eq. 8 scaled)
+
+U and p are interpolated (VTK probe, trilinear in the cell of the point-interpolated fields) inside
+the lumen; WSS is interpolated on the ``wall`` patch at the point closest to each wall grid point
+(rho_n = 1). Points the probe does not find in the CFD mesh (the Eq. 8 wall and the snapped mesh
+wall differ by a fraction of a cell) are handled explicitly and counted:
+
+* rho_n = 1: U = 0 (no-slip; always, inside or not); p from the nearest cell if outside;
+* rho_n < 1: U and p from the nearest cell centre (distance reported).
+
+Vector fields are stored twice: Cartesian (``U``, ``WSS``, as in the case) and in the local VCS
+frame (``U_vcs``, ``WSS_vcs``: components along t(tau), e_theta = -v1 sin theta + v2 cos theta,
+e_rho = v1 cos theta + v2 sin theta), which are invariant to rigid motions and are what the atlas
+compares across patients.
+
+This is the only atlas module that reads OpenFOAM (pyvista's POpenFOAMReader).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time as _time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from vcs.errors import VCSInputError
+
+log = logging.getLogger(__name__)
+
+TWO_PI = 2.0 * np.pi
+GRID_DEFAULTS = {"n_tau": 64, "n_theta": 32, "n_rho": 11}
+
+
+# ---------------------------------------------------------------------------------------------
+# The measurement grid (pure numpy)
+# ---------------------------------------------------------------------------------------------
+def sample_grid(n_tau: int, n_theta: int, n_rho: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """1-D tau (n_tau,) in [0, 1], theta (n_theta,) = 2 pi j / n_theta, rho_n (n_rho,) in [0, 1]."""
+    if min(n_tau, n_theta, n_rho) < 2:
+        raise VCSInputError(f"the grid needs n_tau, n_theta, n_rho >= 2, got {n_tau}, {n_theta}, {n_rho}")
+    return np.linspace(0.0, 1.0, n_tau), TWO_PI * np.arange(n_theta) / n_theta, np.linspace(0.0, 1.0, n_rho)
+
+
+def grid_points(model, tau, theta, rho_n) -> tuple[np.ndarray, np.ndarray]:
+    """Grid points (n_tau, n_theta, n_rho, 3) in mm and rho_w (n_tau, n_theta) in mm."""
+    if model.wall is None:
+        raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
+    T, TH = np.meshgrid(tau, theta, indexing="ij")
+    rho_w = model.wall(T, TH)
+    rho = rho_w[:, :, None] * np.asarray(rho_n)[None, None, :]
+    pts = model.vcs.to_cartesian(T[:, :, None], TH[:, :, None], rho)
+    return pts, rho_w
+
+
+def local_frame(model, tau, theta) -> np.ndarray:
+    """(n_tau, n_theta, 3, 3): rows e_t, e_theta, e_rho of the VCS frame at each (tau, theta)."""
+    t, v1, v2 = model.vcs.frame(np.asarray(tau, float))
+    c, s = np.cos(theta)[None, :, None], np.sin(theta)[None, :, None]
+    t, v1, v2 = t[:, None, :], v1[:, None, :], v2[:, None, :]
+    e_rho = c * v1 + s * v2
+    e_th = -s * v1 + c * v2
+    return np.stack(np.broadcast_arrays(t, e_th, e_rho), axis=-2)
+
+
+def to_vcs_components(vectors: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """Cartesian vectors (n_tau, n_theta, [n_rho,] 3) -> (u_t, u_theta, u_rho) in the local frame."""
+    if vectors.ndim == 4:
+        return np.einsum("ijab,ijkb->ijka", frame, vectors)
+    return np.einsum("ijab,ijb->ija", frame, vectors)
+
+
+def from_vcs_components(components: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_vcs_components`."""
+    if components.ndim == 4:
+        return np.einsum("ijab,ijka->ijkb", frame, components)
+    return np.einsum("ijab,ija->ijb", frame, components)
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading a case
+# ---------------------------------------------------------------------------------------------
+def read_case(case_dir, *, time: float | None = None, wall_patch: str = "wall"):
+    """Internal mesh and wall patch of a reconstructed OpenFOAM case at the last (or given) time.
+
+    Returns (internal: pyvista.UnstructuredGrid, wall: pyvista.PolyData, time: float), both with
+    cell and point (cell-to-point) data, in the case's units (metres).
+    """
+    import pyvista as pv
+
+    case = Path(case_dir)
+    if not (case / "system" / "controlDict").is_file():
+        raise VCSInputError(f"'{case}' is not an OpenFOAM case (no system/controlDict)")
+    foam = case / "case.foam"
+    if not foam.exists():
+        foam.touch()
+    reader = pv.POpenFOAMReader(str(foam))
+    reader.case_type = "reconstructed"
+    times = list(reader.time_values)
+    if not times:
+        raise VCSInputError(f"'{case}' has no time directory with fields; run the solver (and reconstructPar) first")
+    t = times[-1] if time is None else min(times, key=lambda v: abs(v - time))
+    reader.set_active_time_value(t)
+    reader.cell_to_point_creation = True
+    reader.enable_all_patch_arrays()
+    mb = reader.read()
+    internal = mb["internalMesh"]
+    boundary = mb["boundary"]
+    if boundary is None or wall_patch not in boundary.keys():
+        raise VCSInputError(f"case '{case}' has no '{wall_patch}' patch (patches: {list(boundary.keys()) if boundary else []})")
+    wall = boundary[wall_patch]
+    for name in ("U", "p"):
+        if name not in internal.cell_data:
+            raise VCSInputError(f"case '{case}' time {t:g} has no field '{name}'")
+    if not isinstance(wall, pv.PolyData):
+        wall = wall.extract_surface(algorithm="dataset_surface")
+    return internal, wall.triangulate(), float(t)
+
+
+# ---------------------------------------------------------------------------------------------
+# Sampling
+# ---------------------------------------------------------------------------------------------
+def _closest_on_surface(surface, points):
+    """Closest cell and barycentric weights of the closest point on a triangulated surface."""
+    import vtk
+
+    loc = vtk.vtkStaticCellLocator()
+    loc.SetDataSet(surface)
+    loc.BuildLocator()
+    cell = np.empty(len(points), np.int64)
+    closest = np.empty((len(points), 3))
+    dist = np.empty(len(points))
+    cp = [0.0, 0.0, 0.0]
+    cid, sub, d2 = vtk.reference(0), vtk.reference(0), vtk.reference(0.0)
+    for i, p in enumerate(points):
+        loc.FindClosestPoint(p, cp, cid, sub, d2)
+        cell[i], closest[i], dist[i] = int(cid), cp, np.sqrt(float(d2))
+    tri = surface.regular_faces[cell]
+    a, b, c = (surface.points[tri[:, k]] for k in range(3))
+    v0, v1, v2 = b - a, c - a, closest - a
+    d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((v0, v0), (v0, v1), (v1, v1)))
+    d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
+    den = np.where(np.abs(d00 * d11 - d01**2) > 0, d00 * d11 - d01**2, 1.0)
+    w1 = (d11 * d20 - d01 * d21) / den
+    w2 = (d00 * d21 - d01 * d20) / den
+    w = np.clip(np.column_stack([1 - w1 - w2, w1, w2]), 0, 1)
+    w /= w.sum(axis=1, keepdims=True)
+    return cell, tri, w, dist
+
+
+def sample_mesh(internal, wall, model, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
+                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
+                wss_name: str = "wallShearStress") -> dict:
+    """Sample U, p (internal mesh) and WSS (wall surface) on the model's grid; see the module doc.
+
+    Parameters
+    ----------
+    internal : pyvista.DataSet with point and cell arrays ``U`` (m/s) and ``p`` (kinematic, m2/s2)
+    wall : pyvista.PolyData (triangles) with ``wallShearStress`` (kinematic) as point or cell data;
+        None to skip WSS
+    model : VesselModel (mm)
+    rho_scale : case length unit per mm (1e-3: the case is in metres)
+    rho_density : kg/m3, to convert the kinematic p and WSS to Pa
+
+    Returns
+    -------
+    dict of arrays (the content of fields.npz), see :func:`sample_case`.
+    """
+    import pyvista as pv
+
+    t0 = _time.perf_counter()
+    tau, theta, rho_n = sample_grid(n_tau, n_theta, n_rho)
+    pts_mm, rho_w = grid_points(model, tau, theta, rho_n)
+    shape = pts_mm.shape[:3]
+    P = pts_mm.reshape(-1, 3) * rho_scale
+    on_wall = np.broadcast_to(rho_n == 1.0, shape).ravel()
+
+    probe = pv.PolyData(P).sample(internal, pass_cell_data=False, pass_point_data=False)
+    valid = np.asarray(probe.point_data["vtkValidPointMask"]).astype(bool)
+    U = np.asarray(probe.point_data["U"], float).copy()
+    p = np.asarray(probe.point_data["p"], float).copy()
+    missing = ~valid
+    centres = internal.cell_centers().points
+    tree = cKDTree(centres)
+    d, j = tree.query(P[missing], workers=-1)
+    U[missing] = np.asarray(internal.cell_data["U"])[j]
+    p[missing] = np.asarray(internal.cell_data["p"])[j]
+    U[on_wall] = 0.0
+    interior_missing = missing & ~on_wall
+    d_int = d[~on_wall[missing]]
+    t_probe = _time.perf_counter()
+
+    U = U.reshape(*shape, 3)
+    p = p.reshape(shape)
+    frame = local_frame(model, tau, theta)
+    out = {
+        "tau": tau, "theta": theta, "rho_n": rho_n, "rho_w_mm": rho_w,
+        "points": P.reshape(*shape, 3),
+        "U": U, "U_vcs": to_vcs_components(U, frame),
+        "p": p * rho_density, "p_kinematic": p,
+        "n_tau": np.int64(n_tau), "n_theta": np.int64(n_theta), "n_rho": np.int64(n_rho),
+        "rho_scale": np.float64(rho_scale), "rho_density": np.float64(rho_density),
+        "n_points": np.int64(P.shape[0]),
+        "n_outside_mesh": np.int64(missing.sum()),
+        "n_wall_noslip": np.int64(on_wall.sum()),
+        "n_wall_outside_mesh": np.int64((missing & on_wall).sum()),
+        "n_interior_nearest": np.int64(interior_missing.sum()),
+        "interior_nearest_max_distance": np.float64(d_int.max() if d_int.size else 0.0),
+    }
+    if wall is not None:
+        Pw = P.reshape(*shape, 3)[:, :, -1].reshape(-1, 3) if rho_n[-1] == 1.0 else (
+            model.surface_points(*np.meshgrid(tau, theta, indexing="ij")).reshape(-1, 3) * rho_scale)
+        cell, tri, w, dist = _closest_on_surface(wall, Pw)
+        if wss_name in wall.point_data:
+            vals = np.asarray(wall.point_data[wss_name], float)
+            wss = np.einsum("ik,ikj->ij", w, vals[tri])
+        elif wss_name in wall.cell_data:
+            wss = np.asarray(wall.cell_data[wss_name], float)[cell]
+        else:
+            raise VCSInputError(f"the wall patch has no '{wss_name}' field; run the wallShearStress function object")
+        wss = wss.reshape(n_tau, n_theta, 3)
+        out.update({"WSS": wss * rho_density, "WSS_kinematic": wss,
+                    "WSS_vcs": to_vcs_components(wss, frame) * rho_density,
+                    "wall_distance_max": np.float64(dist.max()), "wall_distance_mean": np.float64(dist.mean())})
+    out["sample_time_s"] = np.float64(_time.perf_counter() - t0)
+    out["probe_time_s"] = np.float64(t_probe - t0)
+    log.info("sampled %d points: %d outside the CFD mesh (%d on the wall, %d interior -> nearest cell, max %.3g)",
+             P.shape[0], missing.sum(), (missing & on_wall).sum(), interior_missing.sum(), out["interior_nearest_max_distance"])
+    if interior_missing.mean() > 0.05:
+        log.warning("%.1f%% of the interior grid points are outside the CFD mesh: do the model and the case match?",
+                    100 * interior_missing.mean())
+    return out
+
+
+def sample_case(case_dir, model, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
+                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
+                time: float | None = None) -> dict:
+    """Sample a finished OpenFOAM case on the patient's (tau, theta, rho_n) grid.
+
+    Parameters
+    ----------
+    case_dir : reconstructed case (metres) with U, p, wallShearStress at the last time
+    model : VesselModel (mm) whose Eq. 8 wall the case was built from
+    n_tau, n_theta, n_rho : grid size; the same for every patient of an atlas
+    rho_scale : case length units per mm (1e-3 for a case in metres)
+    rho_density : fluid density in kg/m3 (kinematic p and WSS -> Pa)
+
+    Returns
+    -------
+    dict of arrays:
+        tau (n_tau,), theta (n_theta,), rho_n (n_rho,), rho_w_mm (n_tau, n_theta),
+        points (n_tau, n_theta, n_rho, 3) case units,
+        U, U_vcs (n_tau, n_theta, n_rho, 3) m/s, p, p_kinematic (n_tau, n_theta, n_rho) Pa, m2/s2,
+        WSS, WSS_vcs (n_tau, n_theta, 3) Pa, WSS_kinematic,
+        counts: n_points, n_outside_mesh, n_wall_noslip, n_wall_outside_mesh, n_interior_nearest,
+        interior_nearest_max_distance (case units), wall_distance_max/mean, time, timings.
+    """
+    t0 = _time.perf_counter()
+    internal, wall, t = read_case(case_dir, time=time)
+    t_read = _time.perf_counter()
+    out = sample_mesh(internal, wall, model, n_tau=n_tau, n_theta=n_theta, n_rho=n_rho,
+                      rho_scale=rho_scale, rho_density=rho_density)
+    out["time"] = np.float64(t)
+    out["read_time_s"] = np.float64(t_read - t0)
+    out["n_cells"] = np.int64(internal.n_cells)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing
+# ---------------------------------------------------------------------------------------------
+COUNT_KEYS = ("n_points", "n_outside_mesh", "n_wall_noslip", "n_wall_outside_mesh", "n_interior_nearest",
+              "interior_nearest_max_distance", "wall_distance_max", "wall_distance_mean", "n_cells", "time",
+              "read_time_s", "probe_time_s", "sample_time_s")
+
+
+def summary(fields: dict) -> dict:
+    """Counts and timings of a resampling as plain JSON values."""
+    return {k: fields[k].item() for k in COUNT_KEYS if k in fields}
+
+
+def grid_to_vtk(points: np.ndarray, point_arrays: dict | None = None, *, close_theta: bool = True):
+    """A (n_tau, n_theta, n_rho) or (n_tau, n_theta) grid as a pyvista UnstructuredGrid/PolyData.
+
+    With ``close_theta`` the theta = 0 layer is repeated at 2 pi so the surface has no seam.
+    Arrays have the grid's leading shape (plus a trailing 3 for vectors).
+    """
+    import pyvista as pv
+
+    point_arrays = point_arrays or {}
+    if close_theta:
+        points = np.concatenate([points, points[:, :1]], axis=1)
+        point_arrays = {k: np.concatenate([v, v[:, :1]], axis=1) for k, v in point_arrays.items()}
+    if points.ndim == 3:
+        points = points[:, :, None]
+        point_arrays = {k: v[:, :, None] for k, v in point_arrays.items()}
+    n0, n1, n2 = points.shape[:3]
+    g = pv.StructuredGrid()
+    g.points = points.transpose(2, 1, 0, 3).reshape(-1, 3)  # VTK: first index fastest
+    g.dimensions = (n0, n1, n2)
+    for k, v in point_arrays.items():
+        v = np.asarray(v)
+        tail = v.shape[3:]
+        g.point_data[k] = v.transpose(2, 1, 0, *range(3, v.ndim)).reshape(-1, *tail)
+    if n2 == 1:
+        return g.extract_surface(algorithm="dataset_surface")
+    return g.cast_to_unstructured_grid()
+
+
+def write_fields(fields: dict, npz_path, *, vtu_path=None) -> None:
+    """Write ``fields.npz`` (all arrays) and optionally a VTU of the grid (case units) for ParaView,
+    plus ``<npz stem>.json`` with the counts and timings next to the npz."""
+    npz_path = Path(npz_path)
+    np.savez_compressed(npz_path, **fields)
+    npz_path.with_suffix(".json").write_text(json.dumps(summary(fields), indent=1, sort_keys=True) + "\n")
+    if vtu_path is not None:
+        data = {k: fields[k] for k in ("U", "U_vcs", "p", "p_kinematic")}
+        n_rho = fields["rho_n"].shape[0]
+        data["rho_n"] = np.broadcast_to(fields["rho_n"], fields["p"].shape)
+        if "WSS" in fields:  # wall data on the rho_n = 1 layer, zero inside
+            w = np.zeros(fields["U"].shape)
+            w[:, :, n_rho - 1] = fields["WSS"]
+            data["WSS"] = w
+        grid_to_vtk(fields["points"], data).save(str(vtu_path))
+
+
+def load_fields(path) -> dict:
+    """fields.npz -> dict of arrays."""
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
