@@ -1,0 +1,31 @@
+# Vessel Coordinate System (Romero et al. 2024) + OpenFOAM haemodynamic atlas.
+#
+#   snakemake --profile profiles/local                  # demo: 8 synthetic aortas -> results/atlas/
+#   snakemake --profile profiles/local --configfile config/ci.yaml
+#   snakemake --report results/report.html             # after a run
+#
+# Per patient (results/patients/<id>/): vcs_fit -> vcs_wall -> openfoam_case -> openfoam_solve
+# -> fields_sample; then atlas_build over the cohort (results/atlas/) and results/provenance.json.
+
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/geometry.smk"
+include: "workflow/rules/case.smk"
+include: "workflow/rules/solve.smk"
+include: "workflow/rules/sample.smk"
+include: "workflow/rules/atlas.smk"
+include: "workflow/rules/provenance.smk"
+
+
+rule all:
+    input:
+        "results/atlas/atlas.json",
+        patient_files("results/patients/{id}/fields.npz"),
+    default_target: True

@@ -1,0 +1,14 @@
+# OpenFOAM case set-up (vcsflow.render_case): dictionaries from templates/openfoam + the wall STL.
+
+
+rule openfoam_case:
+    input:
+        stl="results/patients/{id}/wall/wall.stl",
+    output:
+        case=directory("results/patients/{id}/case_setup"),
+    params:
+        cfd=cfd_params(),
+    log:
+        "results/logs/openfoam_case/{id}.log",
+    script:
+        "../scripts/openfoam_case.py"

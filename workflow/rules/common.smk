@@ -1,0 +1,184 @@
+# Validation, the patients sheet, wildcard constraints and named input/param functions.
+# Every error about the configuration or the sheet is ONE line on stderr (sys.exit), no traceback.
+
+import csv
+import hashlib
+import json
+import os
+import re
+import shlex
+import sys
+from pathlib import Path
+
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+ID_PATTERN = r"[A-Za-z0-9_-]+"
+DEMO_MESH = re.compile(r"resources/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<seed>[0-9]+)\.stl")
+SHEET_COLUMNS = ("id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap")
+
+# The `vcs` console script lives beside this Python (the project's venv): put it on PATH so that
+# shell rules work without an activated venv (also inside SLURM jobs, which run this file again).
+_VENV_BIN = str(Path(sys.executable).parent)
+if _VENV_BIN not in os.environ.get("PATH", "").split(os.pathsep):
+    os.environ.update(PATH=os.pathsep.join([_VENV_BIN, os.environ.get("PATH", "")]))
+
+
+def fail(message):
+    """Stop with one line on stderr (Snakemake prints SystemExit messages as they are)."""
+    sys.exit(f"vcs-atlas: error: {message}")
+
+
+def _validation_message(exc):
+    """One line from a WorkflowError raised by snakemake.utils.validate."""
+    import jsonschema
+
+    for arg in getattr(exc, "args", ()):
+        if isinstance(arg, jsonschema.exceptions.ValidationError):
+            where = " > ".join(str(p) for p in arg.absolute_path) or "top level"
+            return f"{where}: {arg.message}"
+    return " ".join(str(exc).split())
+
+
+# --------------------------------------------------------------------------- config
+
+try:
+    validate(config, schema="../schemas/config.schema.yaml")
+except WorkflowError as exc:
+    fail(f"invalid configuration ({_validation_message(exc)}); see config/config.yaml")
+
+
+def config_hash(cfg):
+    """sha256 of the configuration as canonical JSON (first 16 hex digits)."""
+    text = json.dumps(cfg, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# --------------------------------------------------------------------------- patients sheet
+
+
+def _sheet_rows(path):
+    """(line number, {column: value}) for the data rows of a TSV with '#' comment lines."""
+    sheet = Path(path)
+    if not sheet.is_file():
+        fail(f"patients sheet '{path}' not found; set `patients:` in the config to an existing TSV")
+    lines = [
+        (n, line)
+        for n, line in enumerate(sheet.read_text(encoding="utf-8").splitlines(), start=1)
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    if not lines:
+        fail(f"patients sheet '{path}' is empty; it needs a header line and one row per patient")
+    header = [h.strip() for h in lines[0][1].split("\t")]
+    unknown = [h for h in header if h not in SHEET_COLUMNS]
+    if unknown or "id" not in header or "mesh" not in header:
+        fail(
+            f"patients sheet '{path}' line {lines[0][0]}: header {header} must be tab separated with "
+            f"columns id, mesh and optionally {', '.join(SHEET_COLUMNS[2:])} (unknown: {unknown})"
+        )
+    rows = []
+    for n, line in lines[1:]:
+        cells = next(csv.reader([line], delimiter="\t", quoting=csv.QUOTE_NONE))
+        if len(cells) > len(header):
+            if any(c.strip() for c in cells[len(header):]):
+                fail(f"patients sheet '{path}' line {n}: {len(cells)} cells but {len(header)} columns")
+        row = {h: (cells[i].strip() if i < len(cells) else "") for i, h in enumerate(header)}
+        rows.append((n, row))
+    if not rows:
+        fail(f"patients sheet '{path}' has a header but no patients")
+    return rows
+
+
+def _check_file(path, sheet, n, pid, column):
+    if not Path(path).is_file() and not DEMO_MESH.fullmatch(path):
+        fail(f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{path}' not found (paths are relative to {os.getcwd()})")
+
+
+def load_patients(sheet):
+    """{id: row} of the patients sheet, validated; empty cells become None; units default to auto."""
+    patients, first_line = {}, {}
+    for n, row in _sheet_rows(sheet):
+        pid = row.get("id", "")
+        if not re.fullmatch(ID_PATTERN, pid):
+            fail(
+                f"patients sheet '{sheet}' line {n}: id '{pid}' must match ^{ID_PATTERN}$ "
+                "(letters, digits, _ and -; it names results/patients/<id>/)"
+            )
+        if pid in first_line:
+            fail(f"patients sheet '{sheet}' line {n}: id '{pid}' already used on line {first_line[pid]}; ids must be unique")
+        first_line[pid] = n
+        record = {k: v for k, v in row.items() if v != ""}
+        try:
+            validate(record, schema="../schemas/patients.schema.yaml")
+        except WorkflowError as exc:
+            msg = _validation_message(exc)
+            if "should not be valid under" in msg:
+                msg = "give the ends either as inlet/outlet points or as inlet_cap/outlet_cap files, not both"
+            fail(f"patients sheet '{sheet}' line {n} (id {pid}): {msg}")
+        for column in ("mesh", "inlet_cap", "outlet_cap"):
+            if column in record:
+                _check_file(record[column], sheet, n, pid, column)
+        patients[pid] = {c: record.get(c) for c in SHEET_COLUMNS} | {"units": record.get("units", "auto")}
+    return patients
+
+
+PATIENTS = load_patients(config["patients"])
+PATIENT_IDS = sorted(PATIENTS)
+
+
+wildcard_constraints:
+    id=ID_PATTERN,
+    kind="aorta|tube|torus|helix",
+    seed="[0-9]+",
+
+
+# --------------------------------------------------------------------------- input functions
+
+
+def fit_input(wildcards):
+    """Mesh (and cap surfaces, when the sheet gives them) of one patient."""
+    row = PATIENTS[wildcards.id]
+    files = {"mesh": row["mesh"]}
+    if row["inlet_cap"]:
+        files.update(inlet_cap=row["inlet_cap"], outlet_cap=row["outlet_cap"])
+    return files
+
+
+def fit_ends(wildcards):
+    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic)."""
+    row = PATIENTS[wildcards.id]
+    if row["inlet"]:
+        return f"--inlet {shlex.quote(row['inlet'])} --outlet {shlex.quote(row['outlet'])}"
+    if row["inlet_cap"]:
+        return f"--inlet-cap {shlex.quote(row['inlet_cap'])} --outlet-cap {shlex.quote(row['outlet_cap'])}"
+    return ""
+
+
+def fit_units(wildcards):
+    return PATIENTS[wildcards.id]["units"]
+
+
+def output_dir(wildcards, output):
+    """Directory of the rule's first output (for tools that take -o DIR)."""
+    return str(Path(output[0]).parent)
+
+
+def wall_n_tau_option():
+    """`--n-tau N` or nothing (square quads) for `vcs wall`."""
+    n_tau = config["wall"]["n_tau"]
+    return "" if n_tau is None else f"--n-tau {int(n_tau)}"
+
+
+def cfd_params():
+    """The cfd block as rendered (flavour auto -> detected at render time)."""
+    return config["cfd"]
+
+
+def solve_ranks():
+    return int(config["cfd"]["ranks"])
+
+
+def patient_files(pattern):
+    """`pattern` ({id}) expanded over every patient of the sheet."""
+    return expand(pattern, id=PATIENT_IDS)
+

@@ -1,0 +1,61 @@
+# Geometry: synthetic demo phantoms, the VCS fit (paper Section 2.2) and the Eq. 8 wall STL.
+
+
+rule vcs_phantom:
+    # Synthetic vessel surface (mm, open ends) for the demo cohort; only for sheet rows whose
+    # mesh is resources/demo/<kind>_seed<N>.stl.
+    output:
+        stl="resources/demo/{kind}_seed{seed}.stl",
+        params="resources/demo/{kind}_seed{seed}.json",
+    params:
+        resolution=config["demo"]["resolution"],
+    log:
+        "results/logs/vcs_phantom/{kind}_seed{seed}.log",
+    shell:
+        "vcs phantom --kind {wildcards.kind} --seed {wildcards.seed} --resolution {params.resolution}"
+        " -o {output.stl:q} --params {output.params:q} > {log:q} 2>&1"
+
+
+rule vcs_fit:
+    # Centerline B-spline + RMF frame + wall model rho_w of one patient. Bad input (unreadable
+    # mesh, ends not found) fails the job with one line in the log (exit code 2).
+    input:
+        unpack(fit_input),
+    output:
+        model="results/patients/{id}/fit/model.json",
+        report="results/patients/{id}/fit/fit_report.json",
+        centerline="results/patients/{id}/fit/centerline.vtp",
+        residuals="results/patients/{id}/fit/wall_residuals.vtp",
+    params:
+        outdir=output_dir,
+        units=fit_units,
+        ends=fit_ends,
+        L=config["vcs"]["L"],
+        K=config["vcs"]["K"],
+        R=config["vcs"]["R"],
+        recentre=config["vcs"]["recentre"],
+    log:
+        "results/logs/vcs_fit/{id}.log",
+    benchmark:
+        "results/benchmarks/vcs_fit/{id}.tsv"
+    shell:
+        "vcs fit {input.mesh:q} -o {params.outdir:q} --units {params.units} {params.ends}"
+        " --L {params.L} --K {params.K} --R {params.R} --recentre {params.recentre} > {log:q} 2>&1"
+
+
+rule vcs_wall:
+    # The model wall x(tau, theta) (Eq. 8) as a closed multi-solid STL (wall/inlet/outlet) in metres.
+    input:
+        model="results/patients/{id}/fit/model.json",
+    output:
+        stl="results/patients/{id}/wall/wall.stl",
+    params:
+        n_tau=wall_n_tau_option(),
+        n_theta=config["wall"]["n_theta"],
+        extend_inlet=config["wall"]["extend_inlet"],
+        extend_outlet=config["wall"]["extend_outlet"],
+    log:
+        "results/logs/vcs_wall/{id}.log",
+    shell:
+        "vcs wall {input.model:q} -o {output.stl:q} --units m {params.n_tau} --n-theta {params.n_theta}"
+        " --extend-inlet {params.extend_inlet} --extend-outlet {params.extend_outlet} > {log:q} 2>&1"

@@ -1,0 +1,100 @@
+# results/provenance.json: what produced the results (written after every run that executed
+# jobs, successful or not; dry-runs and "nothing to be done" leave it alone).
+
+import datetime
+import importlib.metadata
+import platform
+import socket
+import subprocess
+
+PROVENANCE_FILE = Path("results") / "provenance.json"
+PROVENANCE_PACKAGES = (
+    "vcs-atlas", "numpy", "scipy", "pyvista", "vtk", "trimesh", "jinja2", "matplotlib",
+    "snakemake", "snakemake-executor-plugin-slurm", "jsonschema", "PyYAML", "PyFoam",
+)
+_RUN = {"start": datetime.datetime.now(datetime.timezone.utc)}
+
+
+def _git(*args):
+    try:
+        out = subprocess.run(["git", *args], cwd=workflow.basedir, capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
+def _package_versions():
+    versions = {}
+    for name in PROVENANCE_PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+def _openfoam():
+    try:
+        from vcsflow.openfoam import FLAVOURS, detect_openfoam
+
+        flavour, version = detect_openfoam()
+    except Exception as exc:  # provenance must never fail a run
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    requested = config["cfd"]["flavour"]
+    return {
+        "flavour_installed": flavour,
+        "flavour_requested": requested,
+        "label": FLAVOURS.get(flavour, {}).get("label") if flavour else None,
+        "version": version,
+    }
+
+
+def _sha256(path):
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def write_provenance(outcome, logfile):
+    end = datetime.datetime.now(datetime.timezone.utc)
+    start = _RUN["start"]
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    record = {
+        "outcome": outcome,
+        "start": start.isoformat(timespec="seconds"),
+        "end": end.isoformat(timespec="seconds"),
+        "duration_s": round((end - start).total_seconds(), 3),
+        "command_line": shlex.join(sys.argv),
+        "working_directory": os.getcwd(),
+        "snakemake_log": str(logfile) if logfile else None,
+        "git": {
+            "commit": _git("rev-parse", "HEAD"),
+            "describe": _git("describe", "--always", "--dirty"),
+            "dirty": None if status is None else bool(status),
+        },
+        "config_hash": config_hash(config),
+        "config": config,
+        "patients_sheet": {"path": config["patients"], "sha256": _sha256(config["patients"])},
+        "patients": PATIENT_IDS,
+        "openfoam": _openfoam(),
+        "python": {"version": platform.python_version(), "implementation": platform.python_implementation(),
+                   "executable": sys.executable},
+        "packages": _package_versions(),
+        "platform": {"system": platform.platform(), "machine": platform.machine(),
+                     "hostname": socket.gethostname(), "cpus": os.cpu_count()},
+    }
+    PROVENANCE_FILE.parent.mkdir(parents=True, exist_ok=True)
+    PROVENANCE_FILE.write_text(json.dumps(record, indent=1, sort_keys=True, default=str) + "\n")
+
+
+onstart:
+    _RUN["start"] = datetime.datetime.now(datetime.timezone.utc)
+
+
+onsuccess:
+    write_provenance("success", log)
+
+
+onerror:
+    write_provenance("failed", log)

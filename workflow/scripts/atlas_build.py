@@ -1,0 +1,36 @@
+"""Rule atlas_build: the cohort atlas (vcs.atlas.build_atlas) from every patient's model, fields
+and status; excluded patients are listed in atlas.json with the reason from their status."""
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
+import _common  # noqa: E402
+
+log = _common.setup(snakemake, "atlas_build")  # noqa: F821
+
+
+def main(smk):
+    from vcs.atlas import build_atlas, status_exclusion
+    from vcs.vessel import VesselModel
+
+    ids = list(smk.params.ids)
+    models = {pid: VesselModel.load(path) for pid, path in zip(ids, smk.input.models)}
+    statuses = {}
+    for pid, path in zip(ids, smk.input.statuses):
+        with open(path) as fh:
+            statuses[pid] = json.load(fh)
+    fields = {pid: path for pid, path in zip(ids, smk.input.fields) if status_exclusion(statuses[pid]) is None}
+    options = json.loads(json.dumps(dict(smk.params.options)))
+    figures = bool(options.pop("figures", True))
+    if figures and importlib.util.find_spec("vcs.atlas_plots") is None:
+        log.warning("vcs.atlas_plots is not available: atlas written without figures")
+        figures = False
+    atlas = build_atlas(models, fields, statuses, Path(smk.output.json).parent, figures=figures, **options)
+    for pid, reason in atlas.excluded.items():
+        log.warning("excluded %s: %s", pid, reason)
+    log.info("atlas of %d patients (%d excluded) -> %s", len(atlas.patients), len(atlas.excluded), smk.output.json)
+
+
+_common.run(main, snakemake, log)  # noqa: F821

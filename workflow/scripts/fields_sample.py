@@ -1,0 +1,59 @@
+"""Rule fields_sample: resample a finished case onto the patient's (tau, theta, rho_n) grid.
+
+Patients excluded by their status.json (not converged, failed) get placeholder outputs that only
+carry the reason: the atlas excludes them from their status anyway.
+"""
+import json
+import sys
+
+sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
+import _common  # noqa: E402
+
+log = _common.setup(snakemake, "fields_sample")  # noqa: F821
+
+EMPTY_VTU = """<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
+  <UnstructuredGrid>
+    <Piece NumberOfPoints="0" NumberOfCells="0">
+      <Points><DataArray type="Float64" NumberOfComponents="3" format="ascii"></DataArray></Points>
+      <Cells>
+        <DataArray type="Int64" Name="connectivity" format="ascii"></DataArray>
+        <DataArray type="Int64" Name="offsets" format="ascii"></DataArray>
+        <DataArray type="UInt8" Name="types" format="ascii"></DataArray>
+      </Cells>
+    </Piece>
+  </UnstructuredGrid>
+</VTKFile>
+"""
+
+
+def main(smk):
+    import numpy as np
+
+    from vcs.atlas import status_exclusion
+
+    with open(smk.input.status) as fh:
+        status = json.load(fh)
+    reason = status_exclusion(status)
+    if reason is not None:
+        log.warning("%s excluded, not resampled: %s", smk.wildcards.id, reason)
+        np.savez_compressed(smk.output.npz, excluded=np.array(reason))
+        with open(smk.output.summary, "w") as fh:
+            json.dump({"excluded": reason}, fh, indent=1)
+        with open(smk.output.vtu, "w") as fh:
+            fh.write(EMPTY_VTU)
+        return
+
+    from vcs.resample import sample_case, write_fields
+    from vcs.vessel import VesselModel
+
+    grid = dict(smk.params.grid)
+    model = VesselModel.load(smk.input.model)
+    fields = sample_case(smk.input.case, model, n_tau=grid["n_tau"], n_theta=grid["n_theta"], n_rho=grid["n_rho"],
+                         rho_scale=1e-3, rho_density=float(smk.params.rho))
+    write_fields(fields, smk.output.npz, vtu_path=smk.output.vtu)
+    log.info("%s resampled on %dx%dx%d -> %s", smk.wildcards.id, grid["n_tau"], grid["n_theta"], grid["n_rho"],
+             smk.output.npz)
+
+
+_common.run(main, snakemake, log)  # noqa: F821

@@ -1,0 +1,39 @@
+"""Rule openfoam_solve: mesh and solve one patient (vcsflow.run_case) in a copy of its case set-up.
+
+A per-patient failure (meshing, divergence, not converged) is NOT a job failure: it is written to
+status.json (converged false, reason) for the atlas to exclude the patient. Only a broken set-up
+(no OpenFOAM, missing case) fails the job, with one line in the log.
+"""
+import json
+import shutil
+import sys
+import traceback
+
+sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
+import _common  # noqa: E402
+
+log = _common.setup(snakemake, "openfoam_solve")  # noqa: F821
+
+
+def main(smk):
+    from vcsflow.openfoam import detect_openfoam, run_case
+
+    if detect_openfoam()[0] is None:
+        raise FileNotFoundError("no OpenFOAM installation found (simpleFoam not on PATH); run `bash scripts/install.sh`")
+    shutil.copytree(smk.input.setup, smk.output.case, ignore=shutil.ignore_patterns(".snakemake_timestamp"))
+    try:
+        status = run_case(smk.output.case, ranks=smk.threads)
+    except Exception as exc:  # a crash on this patient must not stop the cohort: record it
+        log.error("run_case crashed\n%s", traceback.format_exc())
+        status = {"converged": False, "failed": True, "case": smk.output.case,
+                  "reason": f"vcsflow.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}"}
+    status["patient"] = smk.wildcards.id
+    with open(smk.output.status, "w") as fh:
+        json.dump(status, fh, indent=2, default=float)
+    log.info("%s: converged %s after %s iterations, %s cells, %.1f s in OpenFOAM%s", smk.wildcards.id,
+             status.get("converged"), status.get("iterations"), status.get("cells"),
+             float(status.get("timings_s", {}).get("total", 0.0)),
+             f"; reason: {status['reason']}" if status.get("reason") else "")
+
+
+_common.run(main, snakemake, log)  # noqa: F821
