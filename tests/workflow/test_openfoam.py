@@ -13,7 +13,7 @@ from vcsflow.openfoam import DEFAULTS, detect_openfoam, render_case, run_case
 
 R = 0.01            # tube radius [m]
 L = 0.12            # tube length [m]
-AXIS = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])   # tilted: see write_tube_stl
+AXIS = np.array([0.03, 0.02, 1.0]) / np.linalg.norm([0.03, 0.02, 1.0])  # ~2 deg tilt: see write_tube_stl
 Q_POIS = 2.0e-5     # m3/s -> U_mean 0.064 m/s, Re = 378 (parabolic inlet: developed from the start)
 HAVE_FOAM = shutil.which("simpleFoam") is not None and detect_openfoam()[0] == "esi"
 needs_foam = pytest.mark.skipif(not HAVE_FOAM, reason="Debian's ESI OpenFOAM (simpleFoam) not installed")
