@@ -33,11 +33,11 @@ def _validation_message(exc):
     """One line from a WorkflowError raised by snakemake.utils.validate."""
     import jsonschema
 
-    for arg in getattr(exc, "args", ()):
-        if isinstance(arg, jsonschema.exceptions.ValidationError):
-            where = " > ".join(str(p) for p in arg.absolute_path) or "top level"
-            return f"{where}: {arg.message}"
-    return " ".join(str(exc).split())
+    cause = exc.__cause__ or exc.__context__  # validate() raises WorkflowError inside `except ValidationError`
+    if isinstance(cause, jsonschema.exceptions.ValidationError):
+        where = " > ".join(str(p) for p in cause.absolute_path) or "top level"
+        return f"{where}: {cause.message}"
+    return " ".join(str(exc).split())[:300]
 
 
 # --------------------------------------------------------------------------- config
@@ -114,6 +114,10 @@ def load_patients(sheet):
             msg = _validation_message(exc)
             if "should not be valid under" in msg:
                 msg = "give the ends either as inlet/outlet points or as inlet_cap/outlet_cap files, not both"
+            elif "is a dependency of" in msg:
+                msg = f"{msg.split(': ', 1)[-1]}: the ends need both inlet and outlet (points or caps)"
+            elif "does not match" in msg:
+                msg = f"{msg.split(':', 1)[0]} '{record[msg.split(':', 1)[0]]}' must be three numbers x,y,z"
             fail(f"patients sheet '{sheet}' line {n} (id {pid}): {msg}")
         for column in ("mesh", "inlet_cap", "outlet_cap"):
             if column in record:
