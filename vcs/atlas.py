@@ -325,15 +325,17 @@ def flow_vector(fields: dict, name: str, *, frame: str = "vcs") -> np.ndarray:
     return np.asarray(fields[key], float).ravel()
 
 
-def top_variation_mask(pca: PCA, mode: int, field_shape: tuple, *, fraction: float = 0.2) -> np.ndarray:
-    """Grid cells in the top ``fraction`` of mode ``mode``'s variation (sigma_m |u_m| per cell; the
-    norm over vector components). Returns a bool array of the field's grid shape (without the
-    trailing 3 of vector fields)."""
+def top_variation_mask(pca: PCA, mode: int, field_shape: tuple, *, vector: bool, fraction: float = 0.2) -> np.ndarray:
+    """Grid cells in the top ``fraction`` of mode ``mode``'s variation: sigma_m |u_m| per cell, the
+    norm taken over the trailing 3 components when ``vector``. Returns a bool array of the field's
+    grid shape (``field_shape`` without the trailing 3 of vector fields)."""
     u = np.abs(pca.components[mode] * pca.sigma[mode]).reshape(field_shape)
-    if len(field_shape) and field_shape[-1] == 3 and len(field_shape) > 2:
+    if vector:
         u = np.linalg.norm(u, axis=-1)
-    thr = np.quantile(u, 1.0 - fraction)
-    return u >= thr
+    return u >= np.quantile(u, 1.0 - fraction)
+
+
+VECTOR_FIELDS = ("U", "WSS")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -546,7 +548,8 @@ def build_atlas(models: dict, fields: dict, statuses: dict, out_dir, *, n_modes:
     if figures:
         from vcs import atlas_plots
 
-        summary["files"] = atlas_plots.write_atlas_figures(atlas, out)
+        written = atlas_plots.write_atlas_figures(atlas, out)
+        summary["files"], summary["renderer"] = written["files"], written["renderer"]
     (out / "atlas.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
     log.info("atlas of %d patients (%d excluded) written to %s", len(atlas.patients), len(atlas.excluded), out)
     return atlas

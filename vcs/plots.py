@@ -24,3 +24,24 @@ def residual_map(wall_fit, path, title: str | None = None) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def render_wall(mesh, path, reference=None) -> None:
+    """Off-screen picture of a WallMesh (grey) with optional reference points (red dots)."""
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    from pathlib import Path
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    faces = np.hstack([np.full((len(mesh.faces), 1), 3), mesh.faces]).ravel()
+    poly = pv.PolyData(mesh.vertices, faces)
+    p = pv.Plotter(off_screen=True, window_size=(1000, 500), shape=(1, 2))
+    for col, view in enumerate(("view_yz", "view_xz")):
+        p.subplot(0, col)
+        p.add_mesh(poly, color="lightgray", smooth_shading=True)
+        if reference is not None:
+            p.add_points(np.asarray(reference[0]), color="red", point_size=1, opacity=0.15)
+        getattr(p, view)()
+    p.screenshot(str(path))
+    p.close()

@@ -167,8 +167,9 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
 
     Vertices are left out, and counted by reason, when they lie beyond an end plane, outside
     Omega, when the ray from c(tau) does not reach them first (their outward normal faces the
-    centerline: the wall is not star-convex there), or on a side branch (rho above the robust fit
-    by more than ``branch_rel`` of the local radius; such regions are grown by two vertex rings).
+    centerline: the wall is not star-convex there), or on a side branch (rho above the fit by more
+    than ``branch_rel`` of the local radius, or above the median radius of their tau ring by more
+    than 2.5 ``branch_rel``; such regions are grown by three vertex rings).
     """
     used_v = np.unique(faces)
     pts_all = vertices
@@ -209,9 +210,16 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
         model = lsq_wall(tau[sel], theta[sel], rho[sel], w[sel], K, R, smoothing)
         cand = (reason == 0) | (reason == 4)
         pred = model(np.nan_to_num(tau), np.nan_to_num(theta))
-        out = cand & (rho - pred > branch_rel * pred)
+        # seeds: far above the fit, or far above the median radius of their tau ring (the fit
+        # itself bends toward wide ostia, the ring median does not)
+        n_bins = 4 * (K + 4)
+        b = np.minimum((np.nan_to_num(tau) * n_bins).astype(int), n_bins - 1)
+        ring_med = np.full(n_bins, np.inf)
+        for k in np.unique(b[cand]):
+            ring_med[k] = np.median(rho[cand & (b == k)])
+        out = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * ring_med[b]))
         grown = out.copy()
-        for _ in range(2):
+        for _ in range(3):
             grown = grown | (adj @ grown.astype(float) > 0)
         new_branch = cand & grown
         if np.array_equal(new_branch, reason == 4):

@@ -176,5 +176,5 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
     for f in s["files"].values():
         for path in (f if isinstance(f, list) else [f]):
             assert (tmp_path / path).is_file(), path
-    mask = top_variation_mask(atlas.flow["U"], 0, atlas.field_shapes["U"])
+    mask = top_variation_mask(atlas.flow["U"], 0, atlas.field_shapes["U"], vector=True)
     assert mask.shape == atlas.field_shapes["U"][:-1] and 0.15 < mask.mean() < 0.5

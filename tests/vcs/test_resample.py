@@ -65,6 +65,8 @@ def tube_mesh():
     wall = grid_to_vtk(wall_pts, close_theta=True).triangulate()
     tau_w = 4 * NU * U_MEAN / (RADIUS_MM * 1e-3)  # kinematic |WSS|
     wall.point_data["wallShearStress"] = np.tile(-tau_w * AXIS, (wall.n_points, 1))
+    wall.cell_data["U"] = np.zeros((wall.n_cells, 3))
+    wall.cell_data["p"] = poiseuille(wall.cell_centers().points)[1]
     return vol, wall, tau_w
 
 
@@ -93,7 +95,7 @@ def check_poiseuille(f, tau_w, *, inner=(0.1, 0.9)):
 def test_sample_mesh_poiseuille_analytic(tube_mesh, tmp_path):
     vol, wall, tau_w = tube_mesh
     m = straight_model()
-    f = sample_mesh(vol, wall, m, n_tau=21, n_theta=16, n_rho=9)
+    f = sample_mesh(vol, {"wall": wall}, m, n_tau=21, n_theta=16, n_rho=9)
     assert f["U"].shape == (21, 16, 9, 3) and f["p"].shape == (21, 16, 9) and f["WSS"].shape == (21, 16, 3)
     rms, wss_err = check_poiseuille(f, tau_w)
     assert rms < 0.03, rms
@@ -118,7 +120,7 @@ def test_sample_mesh_far_outside_counts_nearest(tube_mesh):
     """A model 20 % wider than the mesh: the outer grid points are outside the CFD mesh and get the
     nearest cell's values, counted."""
     vol, wall, _ = tube_mesh
-    f = sample_mesh(vol, wall, straight_model(radius_mm=12.0), n_tau=9, n_theta=8, n_rho=7)
+    f = sample_mesh(vol, {"wall": wall}, straight_model(radius_mm=12.0), n_tau=9, n_theta=8, n_rho=7)
     assert f["n_interior_nearest"] > 0
     assert np.all(np.isfinite(f["U"])) and np.all(np.isfinite(f["p"]))
     assert f["interior_nearest_max_distance"] > 1e-3

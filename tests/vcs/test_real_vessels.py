@@ -1,0 +1,120 @@
+"""Fits on every real mesh of ../shared/data/vessels with default parameters (issues 2 and 3)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pathlib import Path
+
+from vcs.io import read_surface
+from vcs.vessel import fit_vessel
+
+pytestmark = pytest.mark.realdata
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+
+CASES = {
+    "simvascular_open": ("simvascular_aorta_segment_open.vtp", {}),
+    "simvascular_capped": ("simvascular_aorta_segment_capped.vtp", {}),
+    "vmtk_closed": ("vmtk_aorta_segment_closed.stl", {"inlet": "219.0,290.0,25.0", "outlet": "221.3,146.5,21.7"}),
+    "vmtk_bifurcation": ("vmtk_aorta_bifurcation_open.stl", {"inlet": "221,177.8,21.3", "outlet": "210.2,102.9,30.8"}),
+    "aortacfd": ("aortacfd_patient1/wall_aorta.stl", {"inlet_cap": "aortacfd_patient1/inlet.stl",
+                                                      "outlet_cap": "aortacfd_patient1/outlet4.stl"}),
+}
+
+
+@pytest.fixture(scope="module")
+def fits(shared_data):
+    out = {}
+    for name, (mesh, opts) in CASES.items():
+        opts = {k: (str(shared_data / v) if k.endswith("cap") else v) for k, v in opts.items()}
+        out[name] = fit_vessel(shared_data / mesh, **opts)
+    return out
+
+
+def _section_centre(surf, p, n, r):
+    """Independent section centre: mean of the wall's cut by the plane (p, n) within 2 r of p
+    (pyvista's slice, not the project's code)."""
+    import pyvista as pv
+
+    faces = np.hstack([np.full((len(surf.faces), 1), 3), surf.faces]).ravel()
+    cut = pv.PolyData(surf.vertices, faces).slice(normal=n, origin=p)
+    pts = np.asarray(cut.points)
+    pts = pts[np.linalg.norm(pts - p, axis=1) < 2 * r]
+    return pts.mean(axis=0)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_centerline_inside_lumen_and_at_end_centres(fits, shared_data, name):
+    model, report, wall_fit = fits[name]
+    surf = read_surface(shared_data / CASES[name][0])
+    wall = surf.vertices[np.unique(surf.faces)]
+    for tau in np.linspace(0.03, 0.97, 48):
+        c = model.vcs.curve(tau)
+        t, v1, v2 = (a[0] for a in model.vcs.frame(np.array([tau])))
+        d = wall - c
+        slab = np.abs(d @ t) < 3.0
+        ang = np.arctan2(d[slab] @ v2, d[slab] @ v1)
+        octants = np.unique(((ang + np.pi) / (np.pi / 4)).astype(int) % 8)
+        assert len(octants) == 8, f"tau={tau:.2f}: wall does not surround the centerline"
+        assert np.linalg.norm(d[slab], axis=1).min() > 1.0
+    # the ends: c(0), c(1) within 1 mm of the end centres computed independently with pyvista
+    for tau, centre in zip((0.0, 1.0), _end_centres(shared_data, name, model)):
+        if centre is not None:
+            d = np.linalg.norm(model.vcs.curve(tau) - centre)
+            assert d < 1.0, f"end tau={tau}: {d:.2f} mm from the end centre"
+
+
+def _end_centres(data, name, model):
+    """End centres by pyvista: open-loop / cap / cap-file point means; None for explicit points."""
+    import pyvista as pv
+
+    mesh_file, opts = CASES[name]
+    s = model.scale_to_mm
+    if "inlet_cap" in opts:
+        return [np.asarray(pv.read(data / opts[k]).points).mean(axis=0) * s for k in ("inlet_cap", "outlet_cap")]
+    if "inlet" in opts and name == "vmtk_closed":
+        return [None, None]
+    mesh = pv.read(data / mesh_file)
+    if "ModelFaceID" in mesh.cell_data and len(np.unique(mesh.cell_data["ModelFaceID"])) >= 3:
+        ids = np.asarray(mesh.cell_data["ModelFaceID"])
+        centres = [np.asarray(mesh.extract_cells(np.where(ids == k)[0]).points).mean(axis=0) * s for k in (2, 3)]
+    else:
+        edges = mesh.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
+                                           non_manifold_edges=False)
+        centres = [np.asarray(b.points).mean(axis=0) * s for b in edges.split_bodies() if b.n_points]
+    pick = lambda p: min(centres, key=lambda c: np.linalg.norm(c - p))  # noqa: E731
+    return [pick(model.vcs.curve(0.0)), pick(model.vcs.curve(1.0))]
+
+
+def test_simvascular_residuals_beat_reference(fits):
+    r = fits["simvascular_open"][1]
+    assert (r["L"], r["K"], r["R"]) == (9, 19, 15)
+    assert r["residual_mean_mm"] <= 0.056
+    assert r["residual_p75_mm"] <= 0.076
+    assert r["residual_max_mm"] <= 0.28
+
+
+def test_aortacfd_branches_left_out(fits):
+    model, r, wf = fits["aortacfd"]
+    assert r["points_not_used"]["branch"] > 500
+    assert r["residual_mean_mm"] < 0.1
+    json.dumps(r)  # the report is JSON-serialisable
+    # the emitted wall, rendered for a human look (test artefact)
+    from vcs.plots import render_wall
+    from vcs.surface import wall_mesh
+
+    art = ARTIFACTS / "aortacfd_wall.png"
+    render_wall(wall_mesh(model), art, reference=(wf.points, None))
+    assert art.stat().st_size > 10_000
+
+
+@pytest.mark.xfail(strict=True, reason="known: low bumps (up to ~1.6x the ring median radius) remain "
+                   "at the supra-aortic ostia; see README 'Known limitations'")
+def test_aortacfd_wall_has_no_bump_at_branches(fits):
+    model, r, wf = fits["aortacfd"]
+    br = wf.reason == 4
+    tau_b, th_b = wf.tau[br], wf.theta[br]
+    ring = model.wall(tau_b[:, None], np.linspace(0, 2 * np.pi, 64)[None, :])
+    assert np.all(model.wall(tau_b, th_b) <= 1.35 * np.median(ring, axis=1))
