@@ -104,9 +104,11 @@ def test_sample_mesh_poiseuille_analytic(tube_mesh, tmp_path):
     assert f["n_wall_noslip"] == 21 * 16
     np.testing.assert_array_equal(f["U"][:, :, -1], 0.0)
     assert f["n_interior_nearest"] < 0.02 * f["n_points"]
-    # pressure in Pa, linear along tau
+    # pressure in Pa, linear along tau; within 1 % of the drop: near the axis the 27 nearest cell
+    # centres of this lattice (0.2 mm apart around the axis, 3 mm along it) lie in one axial layer
     dpdx = 8 * NU * U_MEAN / (RADIUS_MM * 1e-3) ** 2
-    np.testing.assert_allclose(f["p"][:, 0, 0], -RHO * dpdx * f["tau"] * LENGTH_MM * 1e-3, atol=1e-3 * RHO * dpdx * 0.12)
+    drop = RHO * dpdx * LENGTH_MM * 1e-3
+    np.testing.assert_allclose(f["p"][:, 0, 0], -drop * f["tau"], atol=0.01 * drop)
     np.testing.assert_allclose(f["p"], f["p_kinematic"] * RHO)
     write_fields(f, tmp_path / "fields.npz", vtu_path=tmp_path / "fields.vtu")
     g = load_fields(tmp_path / "fields.npz")
@@ -157,9 +159,10 @@ def test_sample_case_hagen_poiseuille(poiseuille_case, tmp_path):
     from vcs.resample import sample_case
 
     case, status = poiseuille_case
-    assert status.get("converged") or status.get("reason") is None or "did not reach" in status["reason"], status
+    assert status["converged"], status.get("reason")
     f = sample_case(case, straight_model(), n_tau=41, n_theta=24, n_rho=11)
     rms, wss_err = check_poiseuille(f, 4 * NU * U_MEAN / (RADIUS_MM * 1e-3), inner=(0.2, 0.8))
     write_fields(f, tmp_path / "fields.npz", vtu_path=tmp_path / "fields.vtu")
-    assert rms <= 0.03, rms
+    assert f["n_interior_nearest"] < 0.01 * f["n_points"]
+    assert rms <= 0.03, rms  # 0.015 with the MLS interpolation (0.034 with the VTK cell-to-point probe)
     assert wss_err <= 0.05, wss_err
