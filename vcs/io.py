@@ -69,6 +69,9 @@ def guess_units(extent: float) -> tuple[str, str]:
 
 def _read_polydata(path: Path):
     import pyvista as pv
+    import vtk
+
+    vtk.vtkObject.GlobalWarningDisplayOff()  # reader errors become our one-line message
 
     try:
         mesh = pv.read(str(path))

@@ -16,6 +16,7 @@ from scipy.sparse import linalg as sparse_linalg
 from scipy.interpolate import BSpline, NdBSpline
 
 from vcs.centerline import uniform_knots
+from vcs.errors import VCSInputError
 
 log = logging.getLogger(__name__)
 
@@ -203,6 +204,12 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
     facing *= orientation
     reason[(reason == 0) & (facing < 0)] = 3
 
+    n_min = (K + 4) * (R + 1)
+    if (reason == 0).sum() < n_min:
+        raise VCSInputError(
+            f"only {(reason == 0).sum()} wall vertices lie inside the section, fewer than the {n_min} wall "
+            f"coefficients (K={K}, R={R}); the mesh is too coarse: remesh it finer or lower --K/--R"
+        )
     adj = _rings(faces, len(vertices))
     model = None
     for _ in range(4):

@@ -1,0 +1,124 @@
+"""CLI: outputs of `vcs fit/coords/cartesian/wall/grid`, and bad input -> one line, exit code 2."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import sweep
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "vcs.cli", *map(str, args)], capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def tube_stl(tmp_path_factory):
+    """Gently curved open tube (mm) written as STL with trimesh (independent writer)."""
+    import trimesh
+
+    c = lambda s: np.stack([10 * np.sin(2 * s), 0 * s, 100 * s], -1)  # noqa: E731
+    ex = lambda s: np.tile([1.0, 0, 0], (len(s), 1))  # noqa: E731
+    ey = lambda s: np.tile([0, 1.0, 0], (len(s), 1))  # noqa: E731
+    V, F = sweep(c, ex, ey, 8.0, 80, 40)
+    path = tmp_path_factory.mktemp("tube") / "tube.stl"
+    trimesh.Trimesh(V, F, process=False).export(path)
+    return path
+
+
+def test_fit_coords_cartesian_round_trip(tube_stl, tmp_path):
+    out = tmp_path / "fit"
+    r = run("fit", tube_stl, "-o", out, "--units", "mm")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((out / "fit_report.json").read_text())
+    assert rep["ends_method"] == "open_loops" and rep["units"] == "mm"
+    assert (out / "centerline.vtp").is_file() and (out / "wall_residuals.vtp").is_file()
+    pts = np.array([[0.5, 1.0, 30.0], [2.0, -3.0, 60.0]])
+    np.savetxt(tmp_path / "p.csv", pts, delimiter=",", header="x,y,z", comments="")
+    assert run("coords", out / "model.json", tmp_path / "p.csv", "-o", tmp_path / "c.csv").returncode == 0
+    assert run("cartesian", out / "model.json", tmp_path / "c.csv", "-o", tmp_path / "x.csv").returncode == 0
+    back = np.loadtxt(tmp_path / "x.csv", delimiter=",", skiprows=1)
+    assert np.abs(back - pts).max() < 1e-6
+    # same input, same bytes
+    out2 = tmp_path / "fit2"
+    run("fit", tube_stl, "-o", out2, "--units", "mm")
+    assert (out / "model.json").read_bytes() == (out2 / "model.json").read_bytes()
+
+
+def test_units_cm_reported_and_outputs_in_input_units(tube_stl, tmp_path):
+    import trimesh
+
+    m = trimesh.load(tube_stl)
+    m.apply_scale(0.1)  # now in cm
+    cm = tmp_path / "tube_cm.stl"
+    m.export(cm)
+    r = run("fit", cm, "-o", tmp_path / "f")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((tmp_path / "f" / "fit_report.json").read_text())
+    assert rep["units"] == "cm" and rep["units_source"].startswith("auto")
+    assert abs(rep["centerline_length_mm"] - 102.0) < 3.0
+
+
+@pytest.mark.parametrize("kind", ["missing", "empty", "extension", "garbage", "nan"])
+def test_bad_mesh_files_give_one_line(tmp_path, kind):
+    path = tmp_path / ("m.stl" if kind != "extension" else "m.xyz")
+    if kind == "empty":
+        path.write_bytes(b"")
+    elif kind in ("garbage", "extension"):
+        path.write_text("this is not a mesh\n")
+    elif kind == "nan":
+        path.write_text("solid s\nfacet normal 0 0 1\nouter loop\nvertex nan 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+                        "endloop\nendfacet\nendsolid s\n")
+    r = run("fit", path, "-o", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr
+    assert not (tmp_path / "out" / "model.json").exists()
+
+
+def test_closed_surface_without_ends(tmp_path):
+    import trimesh
+
+    path = tmp_path / "closed.stl"
+    trimesh.creation.cylinder(radius=10, height=100, sections=48).subdivide_to_size(2.0).export(path)
+    r = run("fit", path, "-o", tmp_path / "o", "--units", "mm")
+    assert r.returncode == 2 and "--inlet" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    # with the ends given as points it works
+    r = run("fit", path, "-o", tmp_path / "o", "--units", "mm", "--inlet", "0,0,49", "--outlet", "0,0,-49")
+    assert r.returncode == 0, r.stderr
+
+
+def test_three_openings_need_a_choice_and_points_outside(shared_data, tmp_path):
+    mesh = shared_data / "vmtk_aorta_bifurcation_open.stl"
+    r = run("fit", mesh, "-o", tmp_path / "o")
+    assert r.returncode == 2 and "3 ends" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = run("fit", mesh, "-o", tmp_path / "o", "--inlet", "0,0,0", "--outlet", "500,500,500")
+    assert r.returncode == 2 and "outside the lumen" in r.stderr, r.stderr
+
+
+def test_wall_stl_and_grid(tube_stl, tmp_path):
+    import pyvista as pv
+    import trimesh
+
+    run("fit", tube_stl, "-o", tmp_path / "f", "--units", "mm")
+    r = run("wall", tmp_path / "f" / "model.json", "-o", tmp_path / "wall.stl", "--units", "m", "--extend-outlet", "2")
+    assert r.returncode == 0, r.stderr
+    text = (tmp_path / "wall.stl").read_text()
+    assert [ln.split()[1] for ln in text.splitlines() if ln.startswith("solid")] == ["wall", "inlet", "outlet"]
+    tm = trimesh.load(tmp_path / "wall.stl", force="mesh")
+    tm.merge_vertices()  # the three solids are loaded as separate parts
+    assert tm.is_watertight and tm.volume > 0
+    for scheme in ("cylindrical", "ogrid"):
+        r = run("grid", tmp_path / "f" / "model.json", "-o", tmp_path / f"{scheme}.vtu", "--scheme", scheme,
+                "--n-tau", 10, "--n-theta", 16, "--n-rho", 4)
+        assert r.returncode == 0, r.stderr
+        g = pv.read(tmp_path / f"{scheme}.vtu")
+        vol = g.compute_cell_sizes()["Volume"]
+        assert {"tau", "theta", "rho_n"} <= set(g.point_data.keys())
+        if scheme == "ogrid":
+            assert vol.min() > 0  # no degenerate cell at the axis
+        else:
+            assert (vol > 0).mean() > 0.7
