@@ -1,5 +1,7 @@
 # Cohort atlas (vcs.atlas): coregistration, shape and flow PCA, shape -> flow regression.
 # Patients excluded by their status.json are listed in atlas.json with the reason.
+# atlas.npz and the VTP/VTU files of vcs.atlas_plots are written beside atlas.json; the PNG
+# figures are also copied to results/atlas/figures/ for `snakemake --report`.
 
 
 rule atlas_build:
@@ -8,8 +10,14 @@ rule atlas_build:
         fields=patient_files("results/patients/{id}/fields.npz"),
         statuses=patient_files("results/patients/{id}/status.json"),
     output:
-        json="results/atlas/atlas.json",
+        json=report("results/atlas/atlas.json", category="Atlas", labels={"file": "atlas.json"}),
         npz="results/atlas/atlas.npz",
+        figures=report(
+            directory("results/atlas/figures"),
+            patterns=["{name}.png"],
+            category="Atlas",
+            labels={"figure": "{name}"},
+        ),
     params:
         ids=PATIENT_IDS,
         options=config["atlas"],

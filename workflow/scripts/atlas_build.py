@@ -1,7 +1,7 @@
 """Rule atlas_build: the cohort atlas (vcs.atlas.build_atlas) from every patient's model, fields
 and status; excluded patients are listed in atlas.json with the reason from their status."""
-import importlib.util
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -24,10 +24,12 @@ def main(smk):
     fields = {pid: path for pid, path in zip(ids, smk.input.fields) if status_exclusion(statuses[pid]) is None}
     options = json.loads(json.dumps(dict(smk.params.options)))
     figures = bool(options.pop("figures", True))
-    if figures and importlib.util.find_spec("vcs.atlas_plots") is None:
-        log.warning("vcs.atlas_plots is not available: atlas written without figures")
-        figures = False
-    atlas = build_atlas(models, fields, statuses, Path(smk.output.json).parent, figures=figures, **options)
+    out_dir = Path(smk.output.json).parent
+    atlas = build_atlas(models, fields, statuses, out_dir, figures=figures, **options)
+    figure_dir = Path(smk.output.figures)
+    figure_dir.mkdir(parents=True, exist_ok=True)
+    for png in sorted(out_dir.glob("*.png")):
+        shutil.copy2(png, figure_dir / png.name)
     for pid, reason in atlas.excluded.items():
         log.warning("excluded %s: %s", pid, reason)
     log.info("atlas of %d patients (%d excluded) -> %s", len(atlas.patients), len(atlas.excluded), smk.output.json)
