@@ -115,14 +115,18 @@ class SlurmCluster:
 # ---------------------------------------------------------------- availability
 
 
+def _which(name: str) -> str | None:
+    """shutil.which, also looking in the sbin dirs (daemons live in /usr/sbin)."""
+    path = os.pathsep.join([os.environ.get("PATH", ""), "/usr/local/sbin", "/usr/sbin", "/sbin"])
+    return shutil.which(name, path=path)
+
+
 def missing_requirements() -> str | None:
     """Reason why no cluster can be started here, or None."""
-    missing = [b for b in REQUIRED_BINARIES if shutil.which(b) is None]
+    missing = [b for b in REQUIRED_BINARIES if _which(b) is None]
     if missing:
         return ("slurm/munge binaries missing: " + ", ".join(missing)
                 + " (Debian: apt-get install -y slurm-wlm munge)")
-    if not (shutil.which("mungekey") or shutil.which("create-munge-key")) and not Path("/dev/urandom").exists():
-        return "cannot create a munge key (no mungekey/create-munge-key)"
     if os.geteuid() != 0:
         return "starting slurmctld/slurmd needs root (SlurmUser=root)"
     return None
@@ -131,11 +135,18 @@ def missing_requirements() -> str | None:
 # ---------------------------------------------------------------- helpers
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def _free_ports(n: int) -> list[int]:
+    """n distinct currently free TCP ports (avoids clashes with any other slurm)."""
+    socks = []
+    try:
+        for _ in range(n):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            socks.append(s)
+            s.bind(("0.0.0.0", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
 
 
 def _node_hardware(nodename: str) -> tuple[str, int, int]:
@@ -144,7 +155,7 @@ def _node_hardware(nodename: str) -> tuple[str, int, int]:
     topo = f"CPUs={cpus}"
     mem_mb = None
     try:
-        out = subprocess.run(["slurmd", "-C"], capture_output=True, text=True, timeout=20).stdout
+        out = subprocess.run([_which("slurmd") or "slurmd", "-C"], capture_output=True, text=True, timeout=20).stdout
         fields = dict(tok.split("=", 1) for tok in out.split() if "=" in tok)
         if "CPUs" in fields:
             cpus = int(fields["CPUs"])
@@ -322,16 +333,16 @@ def _unlink_client_conf(cluster: "SlurmCluster") -> None:
 
 
 def _munge_key(path: Path) -> None:
+    """A private key for our munged (the system /etc/munge/munge.key is never touched)."""
     if path.exists():
         return
-    if shutil.which("mungekey"):
-        subprocess.run(["mungekey", "--create", "--keyfile", str(path)], check=True,
+    if _which("mungekey"):
+        subprocess.run([_which("mungekey"), "--create", "--keyfile", str(path)], check=True,
                        capture_output=True, timeout=30)
-    elif shutil.which("create-munge-key"):
-        subprocess.run(["create-munge-key", "-f"], check=True, capture_output=True, timeout=30)
-        shutil.copy("/etc/munge/munge.key", path)
-    else:
-        path.write_bytes(os.urandom(1024))
+    else:  # old munge without mungekey (create-munge-key only writes /etc/munge)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(os.urandom(1024))
     path.chmod(0o600)
 
 
@@ -420,9 +431,10 @@ def start_cluster(workdir: Path, timeout: float = 90) -> SlurmCluster:
     (workdir / "plugstack.conf").write_text("")
     conf = workdir / "slurm.conf"
     # the conf lives in workdir; add a copy in rundir so the marker is in the daemons' argv
+    ctld_port, slurmd_port = _free_ports(2)
     conf_text = SLURM_CONF_TEMPLATE.format(
-        cluster_name=CLUSTER_NAME, nodename=nodename, ctld_port=_free_port(),
-        slurmd_port=_free_port(), munge_socket=munge_socket, state_dir=state_dir,
+        cluster_name=CLUSTER_NAME, nodename=nodename, ctld_port=ctld_port,
+        slurmd_port=slurmd_port, munge_socket=munge_socket, state_dir=state_dir,
         spool_dir=spool_dir, workdir=workdir, topology=topology, real_memory=real_memory,
         partition=PARTITION,
     )
@@ -461,6 +473,7 @@ def start_cluster(workdir: Path, timeout: float = 90) -> SlurmCluster:
 
 def _spawn(cluster: SlurmCluster, name: str, argv: list[str]) -> None:
     out = open(cluster.workdir / f"{name}.stdout", "ab")
+    argv = [_which(argv[0]) or argv[0], *argv[1:]]
     proc = subprocess.Popen(
         argv, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
         env=cluster.env, preexec_fn=_pdeathsig, start_new_session=True, close_fds=True,
@@ -520,6 +533,10 @@ def stop_cluster(cluster: SlurmCluster, timeout: float = 15) -> None:
     if cluster.procs.get("slurmctld") and cluster.procs["slurmctld"].poll() is None:
         with contextlib.suppress(Exception):
             cluster.run("scancel", "--full", "--partition", cluster.partition, check=False, timeout=10)
+            deadline = time.monotonic() + 10  # let slurmd end the job steps
+            while time.monotonic() < deadline and cluster.run(
+                    "squeue", "-h", "-t", "PD,R,CG", "-o", "%i", check=False, timeout=10).stdout.strip():
+                time.sleep(0.5)
     for name in ("slurmd", "slurmctld", "munged"):
         proc = cluster.procs.get(name)
         if proc is None:
