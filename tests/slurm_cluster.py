@@ -25,8 +25,15 @@ Usage::
     with running_cluster(tmp_path) as cluster:
         subprocess.run(["sbatch", "--wrap", "hostname"], env=cluster.env)
 
-or, in pytest, the session-scoped fixture ``slurm_cluster`` (import it into a
-conftest.py or test module).  The fixture skips (``pytest.skip``) when the
+or, in pytest, the session-scoped fixture ``slurm_cluster`` (yields the
+SlurmCluster; pass ``env=slurm_cluster.env`` to subprocesses). Import it into
+a conftest.py (tests/ is not a package, so put it on sys.path)::
+
+    import sys, pathlib
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+    from slurm_cluster import slurm_cluster  # noqa: E402,F401
+
+Importing it in several places is harmless: one reference-counted cluster.  The fixture skips (``pytest.skip``) when the
 slurm/munge binaries are missing or we are not root, and fails with the
 daemon log tails when the cluster does not come up.
 
@@ -464,10 +471,13 @@ def start_cluster(workdir: Path, timeout: float = 90) -> SlurmCluster:
         _spawn(cluster, "slurmd", ["slurmd", "-D", "-f", str(run_conf), "-N", nodename])
         _wait_node_idle(cluster, timeout)
         _link_client_conf(cluster)
-    except BaseException:
+    except Exception:
         tails = cluster.log_tails()
         stop_cluster(cluster)
         raise SlurmClusterError(f"SLURM test cluster did not start:\n{tails}") from None
+    except BaseException:  # KeyboardInterrupt & co: clean up, re-raise as is
+        stop_cluster(cluster)
+        raise
     return cluster
 
 
