@@ -1,0 +1,744 @@
+"""Synthetic vessel surface phantoms (open tubes, lengths in mm).
+
+These phantoms are test fixtures and the source of the demo cohort; they are not an equation of
+Romero et al. (2024). They give surfaces whose generating centreline, rotation-minimising frame
+and wall radius rho_w(tau, theta) are known exactly, so the VCS fit can be checked against truth.
+
+Every phantom is a regular (s, phi) grid swept around its centreline c(s):
+
+    x(s, phi) = c(s) + r(s, phi) * (cos(phi) v1(s) + sin(phi) v2(s)),
+
+with s in [0, 1] proportional to arc length, {t, v1, v2} a right-handed rotation-minimising frame
+(v2 = t x v1) and phi the angle from v1 towards v2. Each quad of the grid is split into two
+triangles, oriented so that their normals point out of the lumen. The two ends are left open
+(two boundary loops; the loop at s = 0 is the inlet). Vertices are stored ring by ring
+(``params["n_s"]`` rings of ``params["n_phi"]`` vertices, phi_j = 2 pi j / n_phi).
+
+Kinds
+-----
+``tube``   straight circular tube along +z from the origin (radius 10, length 100).
+``torus``  arc of a torus in the xy-plane, centre circle radius 40 about the origin starting at
+           (40, 0, 0) and turning counter-clockwise by 180 deg, tube radius 8.
+``helix``  c = (a cos u, a sin u, b u), a = 20, pitch 2 pi b = 50, 1.5 turns, tube radius 5.
+``aorta``  seeded thoracic aorta, aortic root (three sinuses of Valsalva) -> ascending aorta
+           (optional fusiform aneurysm) -> non-planar arch -> tapering descending aorta.
+
+Only numpy and scipy are used (no mesh libraries), so the module can run anywhere the VCS runs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from vcs.errors import VCSInputError
+from vcs.frame import rotation_minimizing_frame
+
+__all__ = ["Phantom", "make_phantom", "sweep_tube", "write_stl", "KINDS", "AORTA_EDGE_SCALE"]
+
+KINDS = ("tube", "torus", "helix", "aorta")
+
+#: The aorta's target edge is ``AORTA_EDGE_SCALE * resolution`` mm: at resolution = 1 its quad
+#: sides are ~1.25 mm (diagonals ~1.8 mm), which keeps every aorta below 60k triangles. The analytic
+#: kinds use ``resolution`` mm directly.
+AORTA_EDGE_SCALE = 1.25
+
+# Gauss-Legendre nodes on [0, 1] for the quadratures that define the aorta's centreline.
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+_GL_X = 0.5 * (_GL_X + 1.0)
+_GL_W = 0.5 * _GL_W
+
+
+@dataclass(frozen=True)
+class Phantom:
+    """A synthetic vessel surface with its exact generating geometry.
+
+    ``centerline(s)`` and ``radius(s, phi)`` take s in [0, 1] (proportional to arc length);
+    ``frame(s)`` returns the generator's rotation-minimising frame ``(t, v1, v2)``, each (n, 3),
+    in which ``phi`` is measured (phi = 0 along v1, pi/2 along v2 = t x v1).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    kind: str
+    params: dict
+    inlet_center: np.ndarray
+    outlet_center: np.ndarray
+    centerline: Callable[[np.ndarray], np.ndarray]
+    radius: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    frame: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+
+
+# ----------------------------------------------------------------------------------------------
+# generic sweep
+
+
+def _grid_mesh(centers, v1, v2, r, phi):
+    """Vertices/faces of the (s, phi) grid; outward when v2 = t x v1 and s runs along t."""
+    centers, v1, v2 = (np.asarray(a, float) for a in (centers, v1, v2))
+    n_s, n_phi = r.shape
+    d = np.cos(phi)[None, :, None] * v1[:, None, :] + np.sin(phi)[None, :, None] * v2[:, None, :]
+    V = (centers[:, None, :] + r[..., None] * d).reshape(-1, 3)
+    idx = np.arange(n_s * n_phi).reshape(n_s, n_phi)
+    a, b = idx[:-1], idx[1:]
+    a2, b2 = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
+    # (a -> a2) runs along +phi, (a2 -> b2) along +s: normal e_phi x t = +e_r (outward)
+    F = np.stack([np.stack([a, a2, b2], -1), np.stack([a, b2, b], -1)], axis=2).reshape(-1, 3)
+    return V, F.astype(np.int64)
+
+
+def _least_aligned_normal(t):
+    axis = np.eye(3)[int(np.argmin(np.abs(t)))]
+    p = axis - (axis @ t) * t
+    return p / np.linalg.norm(p)
+
+
+def sweep_tube(
+    centerline_pts,
+    radius_fn,
+    *,
+    n_phi: int | None = None,
+    edge: float = 1.0,
+    tangents=None,
+    v1_0=None,
+    frames=None,
+):
+    """Open tube around a polyline: one ring of ``n_phi`` vertices per centreline point.
+
+    Parameters
+    ----------
+    centerline_pts : (n, 3) float, n >= 2
+        Ring centres, in order from the inlet (s = 0) to the outlet (s = 1).
+    radius_fn : float or callable ``(s, phi) -> r``
+        Lumen radius; ``s`` is the normalised cumulative polyline length, broadcast as an
+        (n, 1) column against phi as a (1, n_phi) row. Must be positive (star-shaped sections).
+    n_phi : int, optional
+        Vertices per ring. Default: ``ceil(2 pi r_max / edge)`` (at least 8), r_max taken from
+        ``radius_fn`` on a 64-angle probe.
+    edge : float
+        Target circumferential edge (mm) used when ``n_phi`` is not given.
+    tangents : (n, 3) float, optional
+        Unit tangents; default: arc-length finite differences of the polyline.
+    v1_0 : (3,) float, optional
+        v1 at the first point (projected onto its normal plane); default: the coordinate axis
+        least aligned with the first tangent.
+    frames : ((n, 3), (n, 3)), optional
+        Explicit (v1, v2) at every point (bypasses the rotation-minimising transport).
+
+    Returns
+    -------
+    vertices (n * n_phi, 3) float, faces (2 (n - 1) n_phi, 3) int64: outward normals, open ends.
+    """
+    P = np.asarray(centerline_pts, float)
+    if P.ndim != 2 or P.shape[1] != 3 or len(P) < 2:
+        raise VCSInputError("sweep_tube needs centreline points as an (n >= 2, 3) array")
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    if np.any(seg <= 0):
+        raise VCSInputError("sweep_tube: consecutive centreline points must be distinct")
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    s = arc / arc[-1]
+    if tangents is None:
+        t = np.gradient(P, arc, axis=0, edge_order=2 if len(P) > 2 else 1)
+    else:
+        t = np.asarray(tangents, float)
+    t = t / np.linalg.norm(t, axis=1, keepdims=True)
+    if frames is None:
+        if v1_0 is None:
+            v = _least_aligned_normal(t[0])
+        else:
+            v = np.asarray(v1_0, float)
+            v = v - (v @ t[0]) * t[0]
+            v = v / np.linalg.norm(v)
+        v1 = rotation_minimizing_frame(P, t, v)
+        v2 = np.cross(t, v1)
+    else:
+        v1, v2 = (np.asarray(f, float) for f in frames)
+
+    if callable(radius_fn):
+        rfun = radius_fn
+    else:
+        rconst = float(radius_fn)
+        rfun = lambda ss, pp: np.full(np.broadcast_shapes(np.shape(ss), np.shape(pp)), rconst)  # noqa: E731
+    if n_phi is None:
+        probe = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+        r_max = float(np.max(rfun(s[:, None], probe[None, :])))
+        n_phi = max(8, int(np.ceil(2 * np.pi * r_max / edge)))
+    phi = 2 * np.pi * np.arange(n_phi) / n_phi
+    r = np.broadcast_to(rfun(s[:, None], phi[None, :]), (len(P), n_phi)).astype(float)
+    if np.any(r <= 0):
+        raise VCSInputError("sweep_tube: the radius must be positive everywhere")
+    V, F = _grid_mesh(P, v1, v2, r, phi)
+    if np.mean(np.sum(np.cross(v1, v2) * t, axis=1)) < 0:  # left-handed frame: flip to outward
+        F = F[:, ::-1].copy()
+    return V, F
+
+
+# ----------------------------------------------------------------------------------------------
+# smooth primitives
+
+
+def _ss(x):
+    """C2 smooth step (quintic 'smootherstep'): 0 for x <= 0, 1 for x >= 1."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (x * (6 * x - 15) + 10)
+
+
+def _dss(x):
+    x = np.clip(x, 0.0, 1.0)
+    return 30 * x * x * (1 - x) ** 2
+
+
+def _bump(x):
+    """C2 bump with support (-1, 1), 1 at 0."""
+    return _ss(1.0 - np.abs(x))
+
+
+def _ramp_integral(x, e):
+    """int_0^x ss(v / e) dv."""
+    x = np.asarray(x, float)
+    u = np.clip(x / e, 0.0, 1.0)
+    inside = e * u**4 * (u * (u - 3) + 2.5)
+    return np.where(x >= e, 0.5 * e + (x - e), inside)
+
+
+class _PlateauStep:
+    """Monotone C2 step 0 -> 1 on [0, 1] whose slope is a plateau with smooth ramps e1, e2."""
+
+    def __init__(self, e1: float, e2: float):
+        self.e1, self.e2 = e1, e2
+        self.area = 1.0 - 0.5 * (e1 + e2)
+
+    def __call__(self, t):
+        t = np.clip(t, 0.0, 1.0)
+        a = _ramp_integral(t, self.e1) + _ramp_integral(1.0, self.e2) - _ramp_integral(1.0 - t, self.e2) - t
+        return a / self.area
+
+    def deriv(self, t):
+        inside = (t > 0) & (t < 1)
+        w = _ss(t / self.e1) + _ss((1.0 - t) / self.e2) - 1.0
+        return np.where(inside, w, 0.0) / self.area
+
+
+def _b16(t):
+    """C1 bump 16 t^2 (1 - t)^2 on [0, 1] (0 outside) and its derivative."""
+    inside = (t > 0) & (t < 1)
+    tt = np.clip(t, 0.0, 1.0)
+    return np.where(inside, 16 * tt**2 * (1 - tt) ** 2, 0.0), np.where(inside, 32 * tt * (1 - tt) * (1 - 2 * tt), 0.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# grid helpers
+
+
+def _n_around(r: float, h: float) -> int:
+    return max(12, int(np.ceil(2 * np.pi * r / h)))
+
+
+def _ring_s(length: float, mean_r: Callable[[np.ndarray], np.ndarray], n_phi: int) -> np.ndarray:
+    """Ring parameters in [0, 1] with axial spacing equal to the local circumferential edge."""
+    u = np.linspace(0.0, 1.0, 4001)
+    dens = n_phi / (2 * np.pi * mean_r(u)) * length  # rings per unit s
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(u))])
+    n = max(2, int(np.ceil(cum[-1])))
+    s = np.interp(np.linspace(0.0, cum[-1], n + 1), cum, u)
+    s[0], s[-1] = 0.0, 1.0
+    return s
+
+
+def _reach_ok(vertices, ring_s, n_phi, centerline, length, tol_mm=None) -> bool:
+    """True when every vertex's nearest centreline point is its own ring (no self-intersection)."""
+    n = max(200, int(np.ceil(length / 0.5)))
+    u = np.linspace(0.0, 1.0, n + 1)
+    tree = cKDTree(centerline(u))
+    _, j = tree.query(vertices)
+    tol = (tol_mm if tol_mm is not None else 2.0 + 2 * length / n) / length
+    return bool(np.all(np.abs(u[j] - np.repeat(ring_s, n_phi)) <= tol))
+
+
+def _const_radius(r0):
+    def radius(s, phi):
+        return np.full(np.broadcast_shapes(np.shape(s), np.shape(phi)), float(r0))
+
+    return radius
+
+
+def _finish(kind, V, F, params, centerline, radius, frame) -> Phantom:
+    V = np.ascontiguousarray(V, dtype=float)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    params = {k: _plain(v) for k, v in params.items()}
+    params["n_vertices"] = int(len(V))
+    params["n_triangles"] = int(len(F))
+    return Phantom(
+        vertices=V,
+        faces=F,
+        kind=kind,
+        params=params,
+        inlet_center=np.asarray(centerline(np.array([0.0]))[0], float),
+        outlet_center=np.asarray(centerline(np.array([1.0]))[0], float),
+        centerline=centerline,
+        radius=radius,
+        frame=frame,
+    )
+
+
+def _plain(v):
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v)
+    if isinstance(v, str):
+        return v
+    raise TypeError(f"phantom parameter of type {type(v).__name__} is not JSON-serialisable")
+
+
+def _merge(defaults: dict, overrides: dict, kind: str) -> dict:
+    unknown = sorted(set(overrides) - set(defaults))
+    if unknown:
+        raise VCSInputError(
+            f"unknown {kind} phantom parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(defaults))}"
+        )
+    p = dict(defaults)
+    for k, v in overrides.items():
+        p[k] = type(defaults[k])(v)
+    return p
+
+
+def _s_array(s):
+    return np.asarray(s, float)
+
+
+# ----------------------------------------------------------------------------------------------
+# analytic kinds
+
+
+def _tube(h: float, **overrides) -> Phantom:
+    p = _merge({"radius_mm": 10.0, "length_mm": 100.0}, overrides, "tube")
+    r0, L = p["radius_mm"], p["length_mm"]
+    if r0 <= 0 or L <= 0:
+        raise VCSInputError("tube phantom: radius_mm and length_mm must be positive")
+    ez, ex, ey = np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]
+
+    def centerline(s):
+        s = _s_array(s)
+        return np.stack([0 * s, 0 * s, L * s], -1)
+
+    def frame(s):
+        n = np.shape(_s_array(s))
+        return tuple(np.broadcast_to(e, n + (3,)).copy() for e in (ez, ex, ey))
+
+    n_phi = _n_around(r0, h)
+    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
+    t, v1, v2 = frame(ring)
+    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
+    p.update(length_mm=L, n_phi=n_phi, n_s=len(ring))
+    return V, F, p, centerline, _const_radius(r0), frame, ring
+
+
+def _torus(h: float, **overrides) -> Phantom:
+    p = _merge({"major_radius_mm": 40.0, "tube_radius_mm": 8.0, "arc_angle_deg": 180.0}, overrides, "torus")
+    R, r0, A = p["major_radius_mm"], p["tube_radius_mm"], np.deg2rad(p["arc_angle_deg"])
+    if not (0 < r0 < R) or not (0 < A < 2 * np.pi):
+        raise VCSInputError("torus phantom: need 0 < tube_radius_mm < major_radius_mm and 0 < arc_angle_deg < 360")
+
+    def centerline(s):
+        a = A * _s_array(s)
+        return np.stack([R * np.cos(a), R * np.sin(a), 0 * a], -1)
+
+    def frame(s):
+        a = A * _s_array(s)
+        c, sn, z = np.cos(a), np.sin(a), 0 * a
+        # t, v1 = principal normal (towards the torus axis), v2 = t x v1 = +z
+        return np.stack([-sn, c, z], -1), np.stack([-c, -sn, z], -1), np.stack([z, z, 1 + z], -1)
+
+    L = R * A
+    n_phi = _n_around(r0, h)
+    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
+    _, v1, v2 = frame(ring)
+    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
+    p.update(length_mm=L, n_phi=n_phi, n_s=len(ring))
+    return V, F, p, centerline, _const_radius(r0), frame, ring
+
+
+def _helix(h: float, **overrides) -> Phantom:
+    p = _merge({"helix_radius_mm": 20.0, "pitch_mm": 50.0, "turns": 1.5, "tube_radius_mm": 5.0}, overrides, "helix")
+    a, pitch, turns, r0 = p["helix_radius_mm"], p["pitch_mm"], p["turns"], p["tube_radius_mm"]
+    if min(a, pitch, turns, r0) <= 0:
+        raise VCSInputError("helix phantom: helix_radius_mm, pitch_mm, turns and tube_radius_mm must be positive")
+    b = pitch / (2 * np.pi)
+    w = np.hypot(a, b)
+    U = 2 * np.pi * turns
+    L = w * U
+    kappa, torsion = a / w**2, b / w**2
+    if r0 * kappa >= 0.8:
+        raise VCSInputError(
+            f"helix phantom: tube radius {r0:g} mm must be below 0.8 x the radius of curvature "
+            f"{1 / kappa:.2f} mm; lower tube_radius_mm or raise helix_radius_mm/pitch_mm"
+        )
+    if turns > 1 and pitch <= 2.2 * r0 * w / a:
+        raise VCSInputError(
+            f"helix phantom: successive turns overlap (pitch {pitch:g} mm <= {2.2 * r0 * w / a:.2f} mm); raise pitch_mm"
+        )
+
+    def centerline(s):
+        u = U * _s_array(s)
+        return np.stack([a * np.cos(u), a * np.sin(u), b * u], -1)
+
+    def frame(s):
+        u = U * _s_array(s)
+        c, sn = np.cos(u), np.sin(u)
+        t = np.stack([-a * sn, a * c, np.full_like(u, b)], -1) / w
+        N = np.stack([-c, -sn, 0 * u], -1)
+        B = np.stack([b * sn, -b * c, np.full_like(u, a)], -1) / w
+        ang = -torsion * w * u  # exact rotation-minimising angle from the Frenet normal
+        ca, sa = np.cos(ang)[..., None], np.sin(ang)[..., None]
+        v1 = ca * N + sa * B
+        v2 = ca * B - sa * N
+        return t, v1, v2
+
+    n_phi = _n_around(r0, h)
+    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
+    _, v1, v2 = frame(ring)
+    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
+    p.update(length_mm=L, curvature_radius_mm=1 / kappa, torsion_per_mm=torsion, n_phi=n_phi, n_s=len(ring))
+    return V, F, p, centerline, _const_radius(r0), frame, ring
+
+
+# ----------------------------------------------------------------------------------------------
+# aorta
+
+
+def _aorta_sample(rng: np.random.Generator) -> dict:
+    """Draw the aorta's free parameters (fixed order: the stream never depends on overrides)."""
+    u = rng.uniform
+    q = {}
+    q["ascending_diameter_mm"] = u(28.0, 48.0)
+    q["annulus_diameter_ratio"] = u(0.82, 0.95)
+    q["arch_end_diameter_ratio"] = u(0.75, 0.90)
+    q["outlet_diameter_ratio"] = u(0.80, 0.95)
+    q["root_tilt_deg"] = u(0.0, 15.0)
+    q["ascending_bend_deg"] = u(-5.0, 15.0)
+    q["ascending_length_mm"] = u(80.0, 105.0)
+    q["arch_curvature_radius_mm"] = u(28.0, 45.0)
+    q["arch_ramp_proximal"] = u(0.15, 0.30)
+    q["arch_ramp_distal"] = u(0.15, 0.30)
+    q["arch_out_of_plane_deg"] = (1.0 if rng.random() < 0.5 else -1.0) * u(5.0, 22.0)
+    q["target_length_mm"] = u(280.0, 340.0)
+    q["descending_wobble_deg"] = u(0.0, 8.0)
+    q["descending_wobble_wavelength_mm"] = u(80.0, 160.0)
+    q["descending_twist_deg"] = u(0.0, 8.0)
+    q["descending_twist_wavelength_mm"] = u(80.0, 160.0)
+    q["descending_twist_phase_deg"] = u(0.0, 360.0)
+    q["sinus_tau_start"] = u(0.025, 0.035)
+    q["sinus_tau_end"] = u(0.11, 0.13)
+    q["sinus_bulge"] = u(0.18, 0.35)
+    q["sinus_lobe_power"] = u(1.0, 2.0)
+    q["sinus_orientation_deg"] = u(0.0, 120.0)
+    q["aneurysm"] = bool(rng.random() < 0.5)
+    q["aneurysm_diameter_ratio"] = u(1.2, 1.6)
+    q["aneurysm_position"] = u(0.0, 1.0)
+    q["aneurysm_length_fraction"] = u(0.6, 1.0)
+    q["aneurysm_eccentricity"] = u(0.0, 0.1)
+    q["aneurysm_direction_deg"] = 180.0 + u(-30.0, 30.0)
+    return q
+
+
+class _AortaGeometry:
+    """Unit-speed centreline from a heading (theta in the arch plane, beta out of it) and the wall.
+
+    c'(s) = (cos b sin th, sin b, cos b cos th), so s is arc length exactly; the root is at the
+    origin, the ascending aorta rises along +z (tilted towards -x), the arch turns over towards
+    +x and the descending aorta runs down (-z). The rotation-minimising frame is
+    v1 = cos psi E_th + sin psi E_b with psi' = -th' sin b (E_th = d c'/d th / cos b,
+    E_b = d c'/d b); v1(0) = (cos alpha, 0, sin alpha), v2(0) = +y. c and psi are integrated with
+    8-point Gauss-Legendre from a 1 mm table, i.e. exact to round-off.
+    """
+
+    def __init__(self, q: dict, widen: float = 1.0):
+        self.q = q
+        d2r = np.deg2rad
+        self.alpha = d2r(q["root_tilt_deg"])
+        self.delta = d2r(q["ascending_bend_deg"])
+        self.La = q["ascending_length_mm"]
+        self.step = _PlateauStep(q["arch_ramp_proximal"], q["arch_ramp_distal"])
+        self.turn = np.pi + self.alpha - self.delta
+        self.beta_a = d2r(q["arch_out_of_plane_deg"])
+        # diameters (mm)
+        D = q["ascending_diameter_mm"]
+        self.D_ann = max(28.0, q["annulus_diameter_ratio"] * D)
+        self.D_d0 = max(26.0, q["arch_end_diameter_ratio"] * D)
+        self.D_out = float(np.clip(q["outlet_diameter_ratio"] * self.D_d0, 25.0, self.D_ann - 2.0))
+        self.R_asc, self.R_ann, self.R_d0, self.R_out = D / 2, self.D_ann / 2, self.D_d0 / 2, self.D_out / 2
+        # arch: curvature radius floored so that r * kappa <= 0.7 in the arch
+        self.Rc = widen * max(q["arch_curvature_radius_mm"], self.R_asc / (0.7 * self.step.area))
+        self.ell = self.turn * self.Rc
+        self.sd = self.La + self.ell
+        self.Ld = max(50.0, q["target_length_mm"] - self.sd)
+        self.L = self.sd + self.Ld
+        self.wob = (d2r(q["descending_wobble_deg"]), q["descending_wobble_wavelength_mm"])
+        self.twi = (d2r(q["descending_twist_deg"]), q["descending_twist_wavelength_mm"], d2r(q["descending_twist_phase_deg"]))
+        # root, sinuses, aneurysm
+        L = self.L
+        self.s1, self.s2 = q["sinus_tau_start"] * L, q["sinus_tau_end"] * L
+        self.s_mid, self.s_half = 0.5 * (self.s1 + self.s2), 0.5 * (self.s2 - self.s1)
+        base_mid = float(self._base(np.array([self.s_mid]))[0])
+        self.sinus_bulge = min(q["sinus_bulge"], 29.5 / base_mid - 1.0)
+        self.lobe_p = q["sinus_lobe_power"]
+        self.phi_sin = d2r(q["sinus_orientation_deg"])
+        # fusiform aneurysm between the sinus crest and the arch: the nearly straight ascending aorta
+        lo, hi = self.s_mid, self.La
+        self.an_half = 0.5 * q["aneurysm_length_fraction"] * (hi - lo)
+        self.an_c = lo + self.an_half + q["aneurysm_position"] * (hi - lo - 2 * self.an_half)
+        self.an_ecc = q["aneurysm_eccentricity"]
+        self.an_phi = d2r(q["aneurysm_direction_deg"])
+        D_an = min(58.0, q["aneurysm_diameter_ratio"] * D)
+        amp = max(0.0, D_an / 2 - self.R_asc)
+        self.an_amp = 0.0
+        if q["aneurysm"]:  # cap so that the widest point (with the sinuses) stays <= 59 mm across
+            sp = np.linspace(self.an_c - self.an_half, self.an_c + self.an_half, 201)[1:-1]
+            ph = np.linspace(0, 2 * np.pi, 120, endpoint=False)
+            room = 29.5 - self.radius_mm(sp[:, None], ph[None, :]).max(axis=1)
+            cap = np.min(room / ((1 + self.an_ecc) * _bump((sp - self.an_c) / self.an_half)))
+            self.an_amp = float(np.clip(amp, 0.0, cap))
+        self._table()
+
+    # heading angles and their s-derivatives
+    def angles(self, s):
+        s = np.asarray(s, float)
+        t_arch = (s - self.La) / self.ell
+        th = -self.alpha + self.delta * _ss(s / self.La) + self.turn * self.step(t_arch)
+        dth = self.delta * _dss(s / self.La) / self.La + self.turn * self.step.deriv(t_arch) / self.ell
+        bb, dbb = _b16(t_arch)
+        be, dbe = self.beta_a * bb, self.beta_a * dbb / self.ell
+        x = np.maximum(s - self.sd, 0.0)
+        ramp, dramp = _ss(x / 30.0), _dss(x / 30.0) / 30.0
+        for amp, lam, ph, which in ((*self.wob, 0.0, "th"), (*self.twi, "be")):
+            k = 2 * np.pi / lam
+            w = amp * np.sin(k * x + ph) * ramp
+            dw = amp * (k * np.cos(k * x + ph) * ramp + np.sin(k * x + ph) * dramp) * (s > self.sd)
+            if which == "th":
+                th, dth = th + w, dth + dw
+            else:
+                be, dbe = be + w, dbe + dw
+        return th, dth, be, dbe
+
+    def _rates(self, s):
+        """Integrands: c'(s) (n, 3) and psi'(s) (n,)."""
+        th, dth, be, _ = self.angles(s)
+        cb = np.cos(be)
+        T = np.stack([cb * np.sin(th), np.sin(be), cb * np.cos(th)], -1)
+        return T, -dth * np.sin(be)
+
+    def _table(self):
+        n = int(np.ceil(self.L / 1.0))
+        self.ht = self.L / n
+        self.st = np.linspace(0.0, self.L, n + 1)
+        x = self.st[:-1, None] + self.ht * _GL_X[None, :]
+        T, dpsi = self._rates(x.ravel())
+        dc = self.ht * np.einsum("k,nkd->nd", _GL_W, T.reshape(n, 8, 3))
+        dp = self.ht * (dpsi.reshape(n, 8) @ _GL_W)
+        self.ct = np.concatenate([np.zeros((1, 3)), np.cumsum(dc, axis=0)])
+        self.pt = np.concatenate([[0.0], np.cumsum(dp)])
+
+    def _integrate(self, s):
+        s = np.clip(np.asarray(s, float), 0.0, self.L)
+        j = np.minimum((s / self.ht).astype(int), len(self.st) - 2)
+        d = s - self.st[j]
+        x = self.st[j][..., None] + d[..., None] * _GL_X
+        T, dpsi = self._rates(x.ravel())
+        c = self.ct[j] + d[..., None] * np.einsum("k,...kd->...d", _GL_W, T.reshape(x.shape + (3,)))
+        psi = self.pt[j] + d * (dpsi.reshape(x.shape) @ _GL_W)
+        return c, psi
+
+    def point(self, s):
+        return self._integrate(s)[0]
+
+    def frame_mm(self, s):
+        s = np.asarray(s, float)
+        _, psi = self._integrate(s)
+        th, _, be, _ = self.angles(s)
+        cb, sb, ct, st = np.cos(be), np.sin(be), np.cos(th), np.sin(th)
+        T = np.stack([cb * st, sb, cb * ct], -1)
+        Eth = np.stack([ct, 0 * ct, -st], -1)
+        Ebe = np.stack([-sb * st, cb, -sb * ct], -1)
+        v1 = np.cos(psi)[..., None] * Eth + np.sin(psi)[..., None] * Ebe
+        return T, v1, np.cross(T, v1)
+
+    def curvature(self, s):
+        _, dth, be, dbe = self.angles(s)
+        return np.hypot(dth * np.cos(be), dbe)
+
+    def _base(self, s):
+        L = self.L
+        return (
+            self.R_ann
+            + (self.R_asc - self.R_ann) * _ss((s - self.s1) / (self.s2 - self.s1))
+            + (self.R_d0 - self.R_asc) * _ss((s - self.La) / self.ell)
+            + (self.R_out - self.R_d0) * _ss((s - self.sd) / (L - self.sd))
+        )
+
+    def radius_mm(self, s, phi):
+        s, phi = np.broadcast_arrays(np.asarray(s, float), np.asarray(phi, float))
+        lobes = (0.5 * (1 + np.cos(3 * (phi - self.phi_sin)))) ** self.lobe_p
+        r = self._base(s) * (1 + self.sinus_bulge * _bump((s - self.s_mid) / self.s_half) * lobes)
+        if self.an_amp > 0:
+            r = r + self.an_amp * _bump((s - self.an_c) / self.an_half) * (1 + self.an_ecc * np.cos(phi - self.an_phi))
+        return r
+
+    def clearance(self) -> float:
+        """min |c_a - c_d| - 2 max(r_a, r_d) (mm) over ascending/descending pairs: positive when
+        every wall point of either is nearer its own centreline than the other's."""
+        s = np.arange(0.0, self.L, 2.0)
+        ph = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+        rmax = self.radius_mm(s[:, None], ph[None, :]).max(axis=1)
+        c = self.point(s)
+        a, d = s < self.La, s > self.sd
+        gap = np.linalg.norm(c[a][:, None] - c[d][None], axis=-1) - 2 * np.maximum(rmax[a][:, None], rmax[d][None])
+        return float(gap.min()) if gap.size else np.inf
+
+    def arch_measures(self):
+        s = np.linspace(0.0, self.L, int(self.L / 0.25) + 1)
+        c = self.point(s)
+        zA = float(c[np.searchsorted(s, self.La), 2])
+        k_top = int(np.argmax(c[:, 2]))
+        below = np.nonzero((c[k_top:, 2] <= zA))[0]
+        B = c[k_top + below[0]] if len(below) else c[-1]
+        A = c[np.searchsorted(s, self.La)]
+        return float(np.linalg.norm(B - A)), float(c[k_top, 2] - zA)
+
+
+def _aorta(h: float, seed: int, **overrides):
+    rng = np.random.default_rng(seed)
+    allowed = set(_aorta_sample(np.random.default_rng(0)))
+    unknown = sorted(set(overrides) - allowed)
+    if unknown:
+        raise VCSInputError(
+            f"unknown aorta phantom parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}"
+        )
+    for attempt in range(25):
+        q = _aorta_sample(rng)
+        for k, v in overrides.items():
+            q[k] = bool(v) if isinstance(q[k], bool) else float(v)
+        widen = 1.0
+        g = _AortaGeometry(q)
+        while g.clearance() < 5.0 and widen < 1.6:  # the descending aorta must clear the root
+            widen *= 1.05
+            g = _AortaGeometry(q, widen)
+        L = g.L
+        if g.clearance() < 5.0 or L > 350.0:
+            continue
+        # wall checks on a dense (s, phi) probe: diameters and r * kappa
+        sp = np.linspace(0.0, L, int(L / 0.5) + 1)
+        ph = np.linspace(0, 2 * np.pi, 180, endpoint=False)
+        rr = g.radius_mm(sp[:, None], ph[None, :])
+        rk = float(np.max(rr.max(axis=1) * g.curvature(sp)))
+        if rk >= 0.75 or rr.max() > 30.0 or rr.min() < 12.5 - 1e-9:
+            continue
+        mean_r = rr.mean(axis=1)
+        n_phi = _n_around(float(mean_r.mean()), h)
+        ring = _ring_s(L, lambda u: np.interp(u * L, sp, mean_r), n_phi)
+        _, v1, v2 = g.frame_mm(ring * L)
+        phi = 2 * np.pi * np.arange(n_phi) / n_phi
+        V, F = _grid_mesh(g.point(ring * L), v1, v2, g.radius_mm(ring[:, None] * L, phi[None, :]), phi)
+
+        def centerline(s, g=g):
+            return g.point(np.asarray(s, float) * g.L)
+
+        if not _reach_ok(V, ring, n_phi, centerline, L):
+            continue
+        break
+    else:
+        raise VCSInputError(
+            f"aorta phantom: no valid geometry in 25 draws with overrides {overrides}; relax the overrides"
+        )
+
+    def radius(s, phi, g=g):
+        return g.radius_mm(np.asarray(s, float) * g.L, phi)
+
+    def frame(s, g=g):
+        return g.frame_mm(np.asarray(s, float) * g.L)
+
+    width, height = g.arch_measures()
+    asc_max = float(2 * rr.max(axis=1)[(sp > g.s2) & (sp < g.La)].max())
+    in_an = np.abs(sp - g.an_c) < g.an_half
+    an_max = float(2 * rr.mean(axis=1)[in_an].max()) if q["aneurysm"] and in_an.any() else 0.0
+    p = dict(q)
+    p.update(
+        annulus_diameter_mm=g.D_ann,
+        arch_end_diameter_mm=g.D_d0,
+        outlet_diameter_mm=g.D_out,
+        arch_curvature_radius_used_mm=g.Rc,
+        arch_widening=widen,
+        ascending_descending_clearance_mm=g.clearance(),
+        arch_turn_deg=float(np.rad2deg(g.turn)),
+        arch_length_mm=g.ell,
+        descending_length_mm=g.Ld,
+        length_mm=L,
+        sinus_bulge_used=g.sinus_bulge,
+        sinus_max_diameter_mm=2 * float(g.radius_mm(np.array([g.s_mid]), np.array([g.phi_sin]))[0]),
+        ascending_max_diameter_mm=asc_max,
+        aneurysm_max_diameter_mm=an_max,
+        aneurysm_center_tau=g.an_c / L if q["aneurysm"] else 0.0,
+        aneurysm_half_length_mm=g.an_half if q["aneurysm"] else 0.0,
+        arch_width_mm=width,
+        arch_height_mm=height,
+        max_diameter_mm=2 * float(rr.max()),
+        min_diameter_mm=2 * float(rr.min()),
+        max_radius_times_curvature=rk,
+        n_rejected=attempt,
+        n_phi=n_phi,
+        n_s=len(ring),
+    )
+    return V, F, p, centerline, radius, frame, ring
+
+
+# ----------------------------------------------------------------------------------------------
+# public entry points
+
+
+def make_phantom(kind: str, *, seed: int = 0, resolution: float = 1.0, **overrides) -> Phantom:
+    """Build a phantom of ``kind`` (tube, torus, helix, aorta); see the module docstring.
+
+    ``resolution`` is the target triangle edge (mm; quad sides, diagonals are sqrt(2) longer) for
+    the analytic kinds and ``AORTA_EDGE_SCALE * resolution`` for the aorta. ``seed`` only affects
+    the aorta. ``overrides`` set generator parameters by name (unknown names are an error); all
+    parameters, drawn or derived, are returned in ``Phantom.params``.
+    """
+    if kind not in KINDS:
+        raise VCSInputError(f"unknown phantom kind '{kind}'; choose one of {', '.join(KINDS)}")
+    resolution = float(resolution)
+    if not np.isfinite(resolution) or resolution <= 0:
+        raise VCSInputError(f"phantom resolution must be a positive edge length in mm, got {resolution}")
+    if kind == "aorta":
+        h = AORTA_EDGE_SCALE * resolution
+        V, F, p, centerline, radius, frame, ring = _aorta(h, int(seed), **overrides)
+    else:
+        h = resolution
+        V, F, p, centerline, radius, frame, ring = {"tube": _tube, "torus": _torus, "helix": _helix}[kind](h, **overrides)
+        if kind != "tube" and not _reach_ok(V, ring, p["n_phi"], centerline, p["length_mm"]):
+            raise VCSInputError(f"{kind} phantom self-intersects with parameters {overrides}; change them")
+    params = {"kind": kind, "seed": int(seed), "resolution": resolution, "edge_mm": h, **p}
+    return _finish(kind, V, F, params, centerline, radius, frame)
+
+
+def write_stl(phantom: Phantom, path) -> None:
+    """Binary STL (single solid, float32, outward facet normals) of ``phantom``'s open surface."""
+    V = np.asarray(phantom.vertices, float)
+    F = np.asarray(phantom.faces)
+    tri = V[F]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
+    rec = np.zeros(len(F), dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
+    rec["n"] = n
+    rec["v"] = tri
+    header = f"vcs phantom kind={phantom.kind} seed={phantom.params.get('seed', 0)} units=mm".encode()[:80]
+    path = Path(path)
+    with open(path, "wb") as fh:
+        fh.write(header.ljust(80, b" "))
+        fh.write(np.array([len(F)], dtype="<u4").tobytes())
+        rec.tofile(fh)
