@@ -207,6 +207,30 @@ def align_models(models, *, n_tau: int = 40, n_theta: int = 24, scale: bool = Fa
     return [transform_model(m, t) for m, t in zip(models, transforms)], transforms, report
 
 
+SHAPE_BLOCKS = ("all", "wall", "centerline")
+
+
+def shape_matrix(models, block: str = "all") -> np.ndarray:
+    """(n, d) feature vectors a = (c, b) of (aligned) models (paper Section 2.3.1).
+
+    ``block`` = ``"all"`` (the paper: centerline control points and wall coefficients together),
+    ``"wall"`` or ``"centerline"`` (beyond the paper): the other block is replaced by its cohort
+    mean, so it has no variance and the PCA modes live in the chosen block only, while every
+    vector stays a complete, rebuildable feature vector (mean shapes, +- sigma shapes and Fig. 7
+    work unchanged). The centerline carries length and arch geometry, the wall the calibre; in a
+    joint PCA the first mode mixes them (see tests/vcs/test_atlas.py, phantom cohort).
+    """
+    if block not in SHAPE_BLOCKS:
+        raise VCSInputError(f"shape block must be one of {SHAPE_BLOCKS}, not {block!r}")
+    X = np.array([m.feature_vector() for m in models])
+    nc = models[0].vcs.control_points.size
+    if block == "wall":
+        X[:, :nc] = X[:, :nc].mean(axis=0)
+    elif block == "centerline":
+        X[:, nc:] = X[:, nc:].mean(axis=0)
+    return X
+
+
 # ---------------------------------------------------------------------------------------------
 # PCA (Section 2.3.3)
 # ---------------------------------------------------------------------------------------------
@@ -452,7 +476,7 @@ class Atlas:
 
 def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 3, n_regression_scores: int | None = None,
                   scale: bool = False, n_tau_align: int = 40, n_theta_align: int = 24, flow_frame: str = "vcs",
-                  flow_fields=FLOW_FIELDS) -> Atlas:
+                  flow_fields=FLOW_FIELDS, shape_block: str = "all") -> Atlas:
     """Coregistration, shape PCA, flow PCA and shape -> flow regression of a cohort.
 
     Parameters
@@ -465,6 +489,8 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
     n_modes : modes kept per PCA (at most n_included - 1)
     n_regression_scores : k shape scores used to predict flow scores (default ``n_modes``)
     scale : similarity instead of rigid alignment (default rigid; see :func:`generalized_procrustes`)
+    shape_block : which part of the feature vector the shape PCA varies (:func:`shape_matrix`)
+    flow_frame : ``"vcs"`` (local-frame vector components, default) or ``"cartesian"``
     """
     excluded = {}
     for pid in models:
@@ -487,7 +513,7 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
                 )
     aligned, transforms, report = align_models([models[p] for p in patients], n_tau=n_tau_align,
                                                n_theta=n_theta_align, scale=scale)
-    shape = PCA.from_data(np.array([m.feature_vector() for m in aligned]), n_modes)
+    shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
     flow = {f: PCA.from_data(np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients]), n_modes)
             for f in flow_fields}
     k = min(n_regression_scores or n_modes, shape.n_modes)
@@ -496,7 +522,8 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
     grid = {key: np.asarray(f0[key]) for key in ("tau", "theta", "rho_n") if key in f0}
     return Atlas(patients, excluded, aligned, transforms, report, shape, flow, shapes0, grid, regression,
                  {"n_modes": n_modes, "n_regression_scores": k, "scale": scale, "flow_frame": flow_frame,
-                  "n_tau_align": n_tau_align, "n_theta_align": n_theta_align})
+                  "n_tau_align": n_tau_align, "n_theta_align": n_theta_align,
+                  "shape_block": shape_block})
 
 
 def atlas_summary(atlas: Atlas) -> dict:

@@ -197,14 +197,17 @@ def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list, path, 
         centre = points.reshape(-1, 3).mean(axis=0)
         if view_normal is None:
             view_normal = np.array([0.0, 0.0, 1.0])
+        same = [v for _, v, c in panels if c == panels[0][2]]  # panels sharing a colour map share limits
+        clim = (float(min(np.min(v) for v in same)), float(max(np.max(v) for v in same)))
         for i, (title, values, cmap) in enumerate(panels):
             pl.subplot(0, i)
             g = grid_to_vtk(pts, {label: _half(values, theta)}, close_theta=False)
             surf = g.extract_surface(algorithm="dataset_surface")
             pl.add_mesh(surf, scalars=label, cmap=cmap, show_scalar_bar=True,
+                        clim=clim if cmap == panels[0][2] else None,
                         scalar_bar_args={"title": f"{label} {i}", "vertical": False})
             pl.add_text(title, font_size=9)
-            pl.camera_position = [tuple(centre + view_normal * 4 * np.ptp(points.reshape(-1, 3), axis=0).max()),
+            pl.camera_position = [tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
                                   tuple(centre), (0.0, 0.0, 1.0) if abs(view_normal[2]) < 0.9 else (0.0, 1.0, 0.0)]
         pl.screenshot(str(path))
         pl.close()

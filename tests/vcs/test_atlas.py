@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from vcs.atlas import (PCA, RigidTransform, align_models, build_atlas, generalized_procrustes, mode_deformation,
+from vcs.atlas import (PCA, RigidTransform, align_models, build_atlas, generalized_procrustes, mode_deformation, shape_matrix,
                        procrustes, ridge_loo, status_exclusion, top_variation_mask, transform_model, wall_grid_points)
 from vcs.centerline import fit_centerline
 from vcs.model import VesselCoordinateSystem
@@ -178,3 +178,42 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
             assert (tmp_path / path).is_file(), path
     mask = top_variation_mask(atlas.flow["U"], 0, atlas.field_shapes["U"], vector=True)
     assert mask.shape == atlas.field_shapes["U"][:-1] and 0.15 < mask.mean() < 0.5
+
+
+# ------------------------------------------------------------------ phantom cohort (vcs.phantom)
+@pytest.fixture(scope="module")
+def aorta_cohort():
+    """8 seeded aorta phantoms (coarse, no aneurysm) fitted with the default L, K, R (~25 s)."""
+    phantom = pytest.importorskip("vcs.phantom", reason="vcs.phantom (colleague's module) not available")
+    from vcs.io import Surface
+    from vcs.vessel import fit_vessel
+
+    models, diameters = [], []
+    for seed in range(8):
+        ph = phantom.make_phantom("aorta", seed=seed, resolution=3.0, aneurysm=False)
+        m, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", f"aorta{seed}"))
+        models.append(m)
+        diameters.append(ph.params["ascending_diameter_mm"])
+    aligned, _, _ = align_models(models)
+    return aligned, np.array(diameters)
+
+
+def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
+    """The generator's dominant parameter is recovered by the first shape mode.
+
+    Measured (seeds 0-7, resolution 3, no aneurysm): |r| = 0.98 for the wall block's first mode,
+    0.87 for the paper's joint (centerline + wall) PCA, whose first mode also carries the arch
+    size and descending length that the generator varies independently of the diameter.
+    """
+    aligned, d = aorta_cohort
+    wall = PCA.from_data(shape_matrix(aligned, "wall"), 3)
+    joint = PCA.from_data(shape_matrix(aligned, "all"), 3)
+    r_wall = abs(np.corrcoef(wall.scores[:, 0], d)[0, 1])
+    r_joint = abs(np.corrcoef(joint.scores[:, 0], d)[0, 1])
+    assert r_wall >= 0.9, r_wall
+    assert r_joint >= 0.8, r_joint
+    # projection of a cohort member: its own scores, reconstruction error ~ 0 with all modes
+    full = PCA.from_data(shape_matrix(aligned, "all"))
+    s, _, err = full.project(aligned[3].feature_vector())
+    np.testing.assert_allclose(s, full.scores[3], atol=1e-8)
+    assert err < 1e-8 * np.linalg.norm(aligned[3].feature_vector())
