@@ -238,29 +238,28 @@ def _wall_distance(lumen: VoxelLumen, vertices: np.ndarray, faces: np.ndarray) -
     With caps counted as walls the path near an end is pushed only by the cap and wanders
     sideways, giving hooks at the ends of the centerline. Distances are to wall samples
     (vertices, edge midpoints, centroids, and a finer barycentric grid on triangles larger than
-    a voxel), via a KD-tree.
+    half a voxel), rasterised into wall voxels; then one Euclidean distance transform.
     """
-    from scipy.spatial import cKDTree
-
     tri = vertices[faces]
     samples = [vertices[np.unique(faces)], tri.mean(axis=1), 0.5 * (tri[:, 0] + tri[:, 1]),
                0.5 * (tri[:, 1] + tri[:, 2]), 0.5 * (tri[:, 2] + tri[:, 0])]
     edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
-    big = edge > lumen.h
-    if big.any():
-        n = int(min(np.ceil(edge[big].max() / (0.5 * lumen.h)), 24))
+    # triangles larger than half a voxel get a barycentric grid of n x n points, n per triangle
+    n_sub = np.minimum(np.ceil(edge / (0.5 * lumen.h)), 24).astype(int)
+    for n in np.unique(n_sub[n_sub > 1]):
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
         keep = i + j <= n
         w1, w2 = i[keep] / n, j[keep] / n
         w0 = 1 - w1 - w2
-        tb = tri[big]
+        tb = tri[n_sub == n]
         samples.append((w0[None, :, None] * tb[:, None, 0] + w1[None, :, None] * tb[:, None, 1]
                         + w2[None, :, None] * tb[:, None, 2]).reshape(-1, 3))
-    tree = cKDTree(np.concatenate(samples))
-    ijk = np.argwhere(lumen.inside)
-    d, _ = tree.query(lumen.centers(ijk), workers=-1)
-    dist = np.zeros_like(lumen.distance)
-    dist[tuple(ijk.T)] = np.maximum(d, 1e-3 * lumen.h)
+    ijk_w = lumen.index_of(np.concatenate(samples))
+    ok = np.all((ijk_w >= 0) & (ijk_w < np.array(lumen.inside.shape)), axis=1)
+    wall = np.zeros(lumen.inside.shape, bool)
+    wall[tuple(ijk_w[ok].T)] = True
+    dist = ndimage.distance_transform_edt(~wall, sampling=lumen.h)
+    dist = np.where(lumen.inside, np.maximum(dist, 0.5 * lumen.h), 0.0)
     return VoxelLumen(lumen.inside, dist, lumen.origin, lumen.h)
 
 

@@ -1,0 +1,78 @@
+"""Benchmark: VCS build time (centerline + frame), wall fit time, whole `vcs fit`, to_vcs throughput.
+
+Prints a Markdown table; run with `.venv/bin/python bench/bench_vcs.py`. Meshes from
+../shared/data are used when present; an aorta phantom is always used.
+"""
+from __future__ import annotations
+
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vcs.ends import find_ends
+from vcs.io import Surface, read_surface
+from vcs.model import VesselCoordinateSystem
+from vcs.vessel import fit_vessel
+from vcs.wall import fit_wall
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "vessels"
+
+
+def best_of(fn, n=3):
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), out
+
+
+def cases():
+    if DATA.is_dir():
+        d = DATA / "aortacfd_patient1"
+        yield "AortaCFD thoracic aorta", read_surface(d / "wall_aorta.stl"), {
+            "inlet_cap": d / "inlet.stl", "outlet_cap": d / "outlet4.stl"}
+        yield "SimVascular segment", read_surface(DATA / "simvascular_aorta_segment_open.vtp"), {}
+    try:
+        from vcs.phantom import make_phantom
+
+        ph = make_phantom("aorta", seed=0, resolution=1.0)
+        yield "aorta phantom (seed 0)", Surface(ph.vertices, ph.faces, {}, "mm", "given", "phantom"), {}
+    except ImportError:
+        pass
+
+
+def main():
+    print(f"machine: {platform.node()}, {platform.processor() or platform.machine()}, "
+          f"Python {platform.python_version()}, best of 3")
+    print("| mesh | triangles | VCS build (centerline+frame) s | wall fit K=19 R=15 s | whole `vcs fit` s |")
+    print("|---|---|---|---|---|")
+    last = None
+    for name, surf, opts in cases():
+        caps = {}
+        for k in ("inlet_cap", "outlet_cap"):
+            if k in opts:
+                c = read_surface(opts[k], surf.units)
+                caps[k] = (c.vertices, c.faces)
+        ends = find_ends(surf.vertices, surf.faces, surf.cell_data, **caps)
+        t_vcs, vcs = best_of(lambda: VesselCoordinateSystem.from_surface(surf.vertices, surf.faces, ends))
+        wf = surf.faces[ends.wall_mask]
+        t_wall, _ = best_of(lambda: fit_wall(vcs, surf.vertices, wf))
+        path = Path(surf.path)
+        if path.is_file():
+            t_all, _ = best_of(lambda: fit_vessel(path, **{k: str(v) for k, v in opts.items()}), 1)
+        else:
+            t_all, _ = best_of(lambda: fit_vessel(surf), 1)
+        print(f"| {name} | {len(surf.faces)} | {t_vcs:.2f} | {t_wall:.3f} | {t_all:.2f} |")
+        last = vcs
+    rng = np.random.default_rng(0)
+    c = last.curve(rng.uniform(0, 1, 10**6))
+    pts = c + rng.normal(0, 5.0, c.shape)
+    t, _ = best_of(lambda: last.to_vcs(pts))
+    print(f"\nto_vcs on 10^6 points: {t:.2f} s = {1e6 / t:,.0f} points/s")
+
+
+if __name__ == "__main__":
+    main()
