@@ -197,13 +197,14 @@ def check_compatible(models) -> None:
 def align_models(models, *, n_tau: int = 40, n_theta: int = 24, scale: bool = False, reference: int = 0):
     """Coregister vessel models by GPA on their Eq. 8 wall grids (paper Section 2.3.2).
 
-    Returns (aligned models, transforms, report).
+    Returns (aligned models, transforms, report); ``report["mean_points_mm"]`` is the GPA mean
+    wall grid ((n_tau * n_theta, 3) array), the target a new vessel is aligned to.
     """
     models = list(models)
     check_compatible(models)
     pts = [wall_grid_points(m, n_tau, n_theta) for m in models]
     transforms, mean, report = generalized_procrustes(pts, scale=scale, reference=reference)
-    report.update({"n_tau": n_tau, "n_theta": n_theta})
+    report.update({"n_tau": n_tau, "n_theta": n_theta, "mean_points_mm": mean})
     return [transform_model(m, t) for m, t in zip(models, transforms)], transforms, report
 
 
@@ -439,11 +440,14 @@ def ridge_loo(X: np.ndarray, Y: np.ndarray, *, alphas=DEFAULT_ALPHAS) -> dict:
 # ---------------------------------------------------------------------------------------------
 # Cohort pipeline
 # ---------------------------------------------------------------------------------------------
-def status_exclusion(status: dict | None) -> str | None:
+def status_exclusion(status: dict | None, *, accept_relaxed: bool = False) -> str | None:
     """Reason to exclude a patient from its case ``status.json`` (None: include).
 
     Excluded when the file is missing, ``failed`` is true, ``status``/``state`` names a failure,
-    or ``converged`` is false. The reason quotes the status's own ``reason``/``error``/``message``.
+    or ``converged`` is false (vcsflow.openfoam writes ``converged`` and ``reason``). With
+    ``accept_relaxed``, a case whose SIMPLE run did not converge but whose time-averaged fallback
+    met the relaxed criterion (``converged_relaxed`` true) is included. The reason quotes the
+    status's own ``reason``/``error``/``message``.
     """
     if status is None:
         return "no status.json"
@@ -453,6 +457,8 @@ def status_exclusion(status: dict | None) -> str | None:
     if status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout"):
         return f"solver failed ({state or 'failed'}){detail}"
     if status.get("converged") is False:
+        if accept_relaxed and status.get("converged_relaxed") is True:
+            return None
         return f"not converged{detail}"
     return None
 
@@ -472,11 +478,12 @@ class Atlas:
     grid: dict  # tau, theta, rho_n of the resampled fields
     regression: dict  # field -> ridge_loo result
     options: dict
+    alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
 
 
 def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 3, n_regression_scores: int | None = None,
                   scale: bool = False, n_tau_align: int = 40, n_theta_align: int = 24, flow_frame: str = "vcs",
-                  flow_fields=FLOW_FIELDS, shape_block: str = "all") -> Atlas:
+                  flow_fields=FLOW_FIELDS, shape_block: str = "all", accept_relaxed: bool = False) -> Atlas:
     """Coregistration, shape PCA, flow PCA and shape -> flow regression of a cohort.
 
     Parameters
@@ -491,10 +498,11 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
     scale : similarity instead of rigid alignment (default rigid; see :func:`generalized_procrustes`)
     shape_block : which part of the feature vector the shape PCA varies (:func:`shape_matrix`)
     flow_frame : ``"vcs"`` (local-frame vector components, default) or ``"cartesian"``
+    accept_relaxed : include time-averaged cases that met the relaxed criterion (:func:`status_exclusion`)
     """
     excluded = {}
     for pid in models:
-        reason = status_exclusion(statuses[pid]) if pid in statuses else None
+        reason = status_exclusion(statuses[pid], accept_relaxed=accept_relaxed) if pid in statuses else None
         if reason is None and pid not in fields:
             reason = "no resampled fields"
         if reason is not None:
@@ -513,6 +521,7 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
                 )
     aligned, transforms, report = align_models([models[p] for p in patients], n_tau=n_tau_align,
                                                n_theta=n_theta_align, scale=scale)
+    gpa_mean = report.pop("mean_points_mm")
     shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
     flow = {f: PCA.from_data(np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients]), n_modes)
             for f in flow_fields}
@@ -523,7 +532,31 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
     return Atlas(patients, excluded, aligned, transforms, report, shape, flow, shapes0, grid, regression,
                  {"n_modes": n_modes, "n_regression_scores": k, "scale": scale, "flow_frame": flow_frame,
                   "n_tau_align": n_tau_align, "n_theta_align": n_theta_align,
-                  "shape_block": shape_block})
+                  "shape_block": shape_block, "accept_relaxed": accept_relaxed}, gpa_mean)
+
+
+def project_model(atlas: Atlas, model, *, n_modes: int | None = None) -> dict:
+    """Project a new vessel onto the atlas's shape modes.
+
+    The model is first aligned rigidly (or by similarity, as the atlas) to the atlas's GPA mean wall
+    grid by :func:`procrustes` on its Eq. 8 wall grid (as the cohort was); its feature vector is
+    then projected.
+
+    Returns dict: ``scores`` (k,), ``scores_sigma`` (scores / sigma), ``reconstruction`` (feature
+    vector from the first ``n_modes`` modes), ``error`` (|a - a_hat|, mm, over the whole vector),
+    ``transform`` (model -> atlas space), ``aligned_model``.
+    """
+    template = atlas.aligned_models[0]
+    check_compatible([template, model])
+    n_tau, n_theta = atlas.options["n_tau_align"], atlas.options["n_theta_align"]
+    T = procrustes(wall_grid_points(model, n_tau, n_theta), atlas.alignment_mean, scale=atlas.options["scale"])
+    aligned = transform_model(model, T)
+    a = aligned.feature_vector()
+    k = atlas.shape.n_modes if n_modes is None else min(n_modes, atlas.shape.n_modes)
+    s = atlas.shape.transform(a)[:k]
+    a_hat = atlas.shape.mean + s @ atlas.shape.components[:k]
+    return {"scores": s, "scores_sigma": s / atlas.shape.sigma[:k], "reconstruction": a_hat,
+            "error": float(np.linalg.norm(a - a_hat)), "transform": T, "aligned_model": aligned}
 
 
 def atlas_summary(atlas: Atlas) -> dict:
