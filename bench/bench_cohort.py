@@ -1,0 +1,99 @@
+"""Cohort throughput of the workflow: N synthetic aortas with the local profile.
+
+Prints the wall time of the Snakemake run against the ideal given by Snakemake's benchmark files
+(sum of all job times / cores), the time spent in OpenFOAM (openfoam_solve benchmark and the
+OpenFOAM utility timings of each status.json), and the share of job time spent outside OpenFOAM.
+Target: parallel efficiency >= 0.9 on 2 cores (one serial case per core).
+
+    .venv/bin/python bench/bench_cohort.py --n 4 --cores 2                 # CI-sized cases
+    .venv/bin/python bench/bench_cohort.py --n 8 --configfile config/config.yaml
+
+The phantoms (vcs_phantom) are generated before the timed run, so that the timed run is the
+per-patient chain + atlas only. Runs in a fresh directory (default: a temporary one).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+SNAKEMAKE = Path(sys.executable).parent / "snakemake"
+
+
+def read_benchmarks(results: Path) -> dict[str, dict[str, float]]:
+    """{rule: {job: seconds}} from results/benchmarks/<rule>/<job>.tsv (Snakemake's `s` column)."""
+    out: dict[str, dict[str, float]] = {}
+    for tsv in sorted((results / "benchmarks").glob("*/*.tsv")):
+        with open(tsv) as fh:
+            rows = list(csv.DictReader(fh, delimiter="\t"))
+        if rows:
+            out.setdefault(tsv.parent.name, {})[tsv.stem] = float(rows[-1]["s"])
+    return out
+
+
+def read_statuses(results: Path) -> dict[str, dict]:
+    return {p.parent.name: json.loads(p.read_text()) for p in sorted((results / "patients").glob("*/status.json"))}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=4, help="patients (aorta phantoms, seeds 0..n-1)")
+    ap.add_argument("--cores", type=int, default=2, help="snakemake --cores")
+    ap.add_argument("--configfile", default=str(REPO / "config" / "ci.yaml"),
+                    help="config merged over config/config.yaml (default: the CI-sized config/ci.yaml)")
+    ap.add_argument("--workdir", help="run here instead of a temporary directory (kept)")
+    args = ap.parse_args(argv)
+
+    work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_cohort_")).resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    sheet = work / "patients.tsv"
+    rows = ["id\tmesh\tunits"] + [f"aorta_{s}\tresources/demo/aorta_seed{s}.stl\tmm" for s in range(args.n)]
+    sheet.write_text("\n".join(rows) + "\n")
+    override = work / "bench.yaml"
+    override.write_text(yaml.safe_dump({"patients": str(sheet)}))
+    base = [str(SNAKEMAKE), "-s", str(REPO / "Snakefile"), "-d", str(work), "--profile", str(REPO / "profiles" / "local"),
+            "--cores", str(args.cores), "--configfile", str(REPO / "config" / "config.yaml"),
+            str(Path(args.configfile).resolve()), str(override)]
+    phantoms = [f"resources/demo/aorta_seed{s}.stl" for s in range(args.n)]
+    subprocess.run(base + ["--quiet", "all", *phantoms], check=True, cwd=work)
+
+    t0 = time.perf_counter()
+    r = subprocess.run(base + ["--quiet", "all"], cwd=work)
+    wall = time.perf_counter() - t0
+    results = work / "results"
+    bench = read_benchmarks(results)
+    statuses = read_statuses(results)
+
+    jobs_s = sum(sum(v.values()) for v in bench.values())
+    solve_s = sum(bench.get("openfoam_solve", {}).values())
+    foam_s = sum(float(s.get("timings_s", {}).get("total") or 0.0) for s in statuses.values())
+    ideal = jobs_s / args.cores
+    converged = sum(bool(s.get("converged")) for s in statuses.values())
+
+    print(f"cohort: {args.n} patients, {args.cores} cores, config {args.configfile}, in {work}")
+    print(f"snakemake exit code {r.returncode}; {converged}/{len(statuses)} cases converged")
+    print("job time per rule (sum of benchmark s):")
+    for rule, times in sorted(bench.items(), key=lambda kv: -sum(kv[1].values())):
+        print(f"  {rule:16s} {sum(times.values()):9.1f} s  over {len(times)} job(s)")
+    print(f"wall time                       {wall:9.1f} s")
+    print(f"sum of solver job times         {solve_s:9.1f} s  (openfoam_solve benchmarks)")
+    print(f"ideal wall (all jobs / cores)   {ideal:9.1f} s")
+    print(f"parallel efficiency             {ideal / wall:9.2f}   (target >= 0.90)")
+    print(f"solver jobs / cores / wall      {solve_s / args.cores / wall:9.2f}")
+    print(f"time inside OpenFOAM utilities  {foam_s:9.1f} s  (status.json timings_s.total)")
+    if jobs_s > 0:
+        print(f"share of job time outside OpenFOAM {1 - foam_s / jobs_s:6.1%}")
+    print(f"scheduler/idle share of core time  {max(0.0, 1 - jobs_s / (args.cores * wall)):6.1%}")
+    return r.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
