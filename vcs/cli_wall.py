@@ -1,4 +1,4 @@
-"""Subcommands built on the wall model: `vcs wall`, `vcs grid`."""
+"""Subcommands built on the wall model: `vcs wall`, `vcs grid`, `vcs sensitivity`."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -44,6 +44,22 @@ def cmd_grid(args) -> None:
     print(f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, {ug.n_cells} cells -> {out}")
 
 
+def cmd_sensitivity(args) -> None:
+    from vcs.io import read_surface, write_csv
+    from vcs.sensitivity import parse_range, plot_sweep, residual_sweep
+
+    Ls, Ks, Rs = (parse_range(getattr(args, n), n) for n in ("L", "K", "R"))
+    surfaces = [read_surface(m, args.units) for m in args.meshes]
+    rows = residual_sweep(surfaces, Ls, Ks, Rs)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "sensitivity.csv", {k: np.array([r[k] for r in rows]) for k in rows[0]})
+    plot_sweep(rows, out / "sensitivity.png")
+    best = min(rows, key=lambda r: r["residual_mean_mm"])
+    print(f"{len(rows)} settings x {len(surfaces)} meshes -> {out}; lowest mean residual "
+          f"{best['residual_mean_mm']:.4f} mm at L={best['L']} K={best['K']} R={best['R']}")
+
+
 def add_commands(sub) -> None:
     """Register the wall-model subcommands on an argparse subparsers object."""
     w = sub.add_parser("wall", help="write the model wall (Eq. 8) as a closed multi-solid STL")
@@ -65,3 +81,12 @@ def add_commands(sub) -> None:
     g.add_argument("--scheme", default="cylindrical", choices=["cylindrical", "ogrid"])
     g.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the VTU points")
     g.set_defaults(func=cmd_grid)
+
+    s = sub.add_parser("sensitivity", help="residuals over ranges of L, K, R for a cohort (paper Fig. 5)")
+    s.add_argument("meshes", nargs="+", help="surfaces whose two ends are found automatically")
+    s.add_argument("--L", default="9", help="range a:b:s of centerline knots")
+    s.add_argument("--K", default="11:23:4", help="range a:b:s of wall knots in tau")
+    s.add_argument("--R", default="7:15:4", help="range a:b:s of wall knots in theta")
+    s.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m"])
+    s.add_argument("-o", "--output", required=True, help="output directory (sensitivity.csv, sensitivity.png)")
+    s.set_defaults(func=cmd_sensitivity)

@@ -57,7 +57,7 @@ def _reach(pts: np.ndarray, max_n: int = 1024) -> np.ndarray:
     right = np.concatenate([Dt[:, 1:], np.full((n, 1), np.inf)], axis=1)
     is_min = (Dt <= left) & (Dt <= right)
     np.fill_diagonal(is_min, False)
-    vals = np.where(is_min, Dt, np.inf).min(axis=1) * 0.5
+    vals = np.minimum(np.where(is_min, Dt, np.inf).min(axis=1) * 0.5, 1e30)  # 1e30: no other part
     return np.interp(np.arange(len(pts)), np.arange(0, len(pts), step)[: len(vals)], vals)
 
 
