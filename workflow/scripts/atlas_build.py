@@ -21,8 +21,10 @@ def main(smk):
     for pid, path in zip(ids, smk.input.statuses):
         with open(path) as fh:
             statuses[pid] = json.load(fh)
-    fields = {pid: path for pid, path in zip(ids, smk.input.fields) if status_exclusion(statuses[pid]) is None}
     options = json.loads(json.dumps(dict(smk.params.options)))
+    accept = bool(options.get("accept_relaxed", False))
+    fields = {pid: path for pid, path in zip(ids, smk.input.fields)
+              if status_exclusion(statuses[pid], accept_relaxed=accept) is None}
     figures = bool(options.pop("figures", True))
     out_dir = Path(smk.output.json).parent
     atlas = build_atlas(models, fields, statuses, out_dir, figures=figures, **options)

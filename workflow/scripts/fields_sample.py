@@ -1,7 +1,8 @@
 """Rule fields_sample: resample a finished case onto the patient's (tau, theta, rho_n) grid.
 
-Patients excluded by their status.json (not converged, failed) get placeholder outputs that only
-carry the reason: the atlas excludes them from their status anyway.
+Cases without a usable solution (failed, or not converged and not even within the relaxed
+criterion of the time-averaged fallback) get placeholder outputs that only carry the reason: the
+atlas excludes them from their status anyway.
 """
 import json
 import sys
@@ -34,7 +35,9 @@ def main(smk):
 
     with open(smk.input.status) as fh:
         status = json.load(fh)
-    reason = status_exclusion(status)
+    # sample every case that has a solution (converged, or time-averaged within the relaxed
+    # criterion); whether the atlas includes the latter is its own option (atlas.accept_relaxed)
+    reason = status_exclusion(status, accept_relaxed=True)
     if reason is not None:
         log.warning("%s excluded, not resampled: %s", smk.wildcards.id, reason)
         np.savez_compressed(smk.output.npz, excluded=np.array(reason))

@@ -1,0 +1,87 @@
+"""The CI configuration end to end with the real OpenFOAM (marker ``openfoam``): 4 synthetic
+aortas -> VCS fit -> wall STL -> snappyHexMesh + simpleFoam -> resampled fields -> atlas; then one
+patient's case is broken and the atlas must list it as excluded with the reason while the others
+stay in. A few minutes on 2 cores."""
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import pytest
+import yaml
+
+from conftest import REPO, Workdir, make_workdir
+
+HAVE_FOAM = shutil.which("simpleFoam") is not None
+SEEDS = (0, 1, 2, 3)
+IDS = [f"demo_aorta_{s}" for s in SEEDS]
+
+
+def _ci_workdir(path) -> Workdir:
+    wd = make_workdir(path, [{"id": f"demo_aorta_{s}", "mesh": f"resources/demo/aorta_seed{s}.stl", "units": "mm"}
+                             for s in SEEDS])
+    cfg = wd.config()
+    ci = yaml.safe_load((REPO / "config" / "ci.yaml").read_text())
+    ci.pop("patients")
+    for key, value in ci.items():
+        if isinstance(value, dict) and isinstance(cfg.get(key), dict):
+            for k, v in value.items():
+                if isinstance(v, dict) and isinstance(cfg[key].get(k), dict):
+                    cfg[key][k].update(v)
+                else:
+                    cfg[key][k] = v
+        else:
+            cfg[key] = value
+    wd.write_config(cfg)
+    return wd
+
+
+@pytest.mark.openfoam
+@pytest.mark.skipif(not HAVE_FOAM, reason="OpenFOAM (simpleFoam) not installed; run scripts/install.sh")
+def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path):
+    wd = _ci_workdir(tmp_path)
+    profile = str(REPO / "profiles" / "local")
+    wd.snakemake("--profile", profile, "--cores", "2", timeout=3600)
+    res = wd.path / "results"
+
+    for pid in IDS:
+        st = json.loads((res / "patients" / pid / "status.json").read_text())
+        assert st["converged"] is True, st.get("reason")
+        assert st["cells"] > 1000 and st["mass_imbalance"] < 1e-3
+        assert (res / "patients" / pid / "fields.npz").stat().st_size > 1000
+        with open(res / "benchmarks" / "openfoam_solve" / f"{pid}.tsv") as fh:
+            assert float(next(csv.DictReader(fh, delimiter="\t"))["s"]) > 0
+    atlas = json.loads((res / "atlas" / "atlas.json").read_text())
+    assert sorted(atlas["patients_included"]) == IDS and atlas["patients_excluded"] == []
+    assert any((res / "atlas" / "figures").glob("*.png"))
+
+    prov = json.loads((res / "provenance.json").read_text())
+    assert prov["outcome"] == "success" and prov["patients"] == IDS
+    assert prov["openfoam"]["flavour_installed"] in ("esi", "org10") and prov["openfoam"]["version"]
+    assert prov["packages"]["snakemake"] and prov["python"]["version"] and prov["config_hash"]
+    assert prov["start"] <= prov["end"]
+
+    # a per-patient CFD failure: blockMesh cannot read its dictionary
+    broken = IDS[-1]
+    (res / "patients" / broken / "case_setup" / "system" / "blockMeshDict").write_text("not a dictionary\n")
+    wd.snakemake("--profile", profile, "--cores", "2", "--forcerun", f"results/patients/{broken}/status.json",
+                 timeout=3600)  # exit code 0: the failure is data, not a job failure
+    st = json.loads((res / "patients" / broken / "status.json").read_text())
+    assert st["converged"] is False and "blockMesh" in st["reason"]
+    atlas = json.loads((res / "atlas" / "atlas.json").read_text())
+    assert sorted(atlas["patients_included"]) == IDS[:-1]
+    (excluded,) = atlas["patients_excluded"]
+    assert excluded["id"] == broken and "blockMesh failed" in excluded["reason"]
+
+    r = wd.snakemake("--report", str(res / "report.html"))
+    assert (res / "report.html").stat().st_size > 10_000, r.stderr
+
+
+def test_broken_mesh_fails_the_fit_with_one_line_in_the_log(tmp_path):
+    (tmp_path / "bad.stl").write_text("this is not an STL file\n")
+    wd = make_workdir(tmp_path, [{"id": "bad", "mesh": "bad.stl", "units": "mm"}])
+    r = wd.snakemake("--cores", "1", "results/patients/bad/fit/model.json", check=False, timeout=600)
+    assert r.returncode != 0
+    log = (tmp_path / "results" / "logs" / "vcs_fit" / "bad.log").read_text().strip().splitlines()
+    assert len(log) == 1 and log[0].startswith("vcs fit: error:"), log
