@@ -366,10 +366,16 @@ VECTOR_FIELDS = ("U", "WSS")
 # ---------------------------------------------------------------------------------------------
 # Shape -> flow regression (beyond the paper)
 # ---------------------------------------------------------------------------------------------
+def _safe_std(X):
+    """Column standard deviations; columns that are constant (to round-off, e.g. the scores of a
+    mode with no variance among the training samples) get inf, i.e. a standardised value of 0."""
+    sx = X.std(0)
+    return np.where(sx > 1e-9 * max(float(sx.max(initial=0.0)), 1e-300), sx, np.inf)
+
+
 def _ridge_solve(X, Y, alpha):
     """Ridge with unpenalised intercept on standardised X. Returns a predict function."""
-    mx, sx = X.mean(0), X.std(0)
-    sx = np.where(sx > 0, sx, 1.0)
+    mx, sx = X.mean(0), _safe_std(X)
     my = Y.mean(0)
     Z = (X - mx) / sx
     B = np.linalg.solve(Z.T @ Z + alpha * np.eye(Z.shape[1]), Z.T @ (Y - my))
@@ -378,9 +384,7 @@ def _ridge_solve(X, Y, alpha):
 
 def _gcv_alpha(X, Y, alphas):
     """alpha minimising the exact leave-one-out error of the ridge fit (hat-matrix shortcut)."""
-    Z = X - X.mean(0)
-    sx = Z.std(0)
-    Z = Z / np.where(sx > 0, sx, 1.0)
+    Z = (X - X.mean(0)) / _safe_std(X)
     Yc = Y - Y.mean(0)
     n = len(X)
     best, best_err = alphas[0], np.inf
@@ -411,7 +415,7 @@ def ridge_loo(X: np.ndarray, Y: np.ndarray, *, alphas=DEFAULT_ALPHAS) -> dict:
     Returns
     -------
     dict: ``r2`` (m,) = 1 - sum (y - y_loo)^2 / sum (y - mean y)^2 per column (can be negative),
-    ``predictions`` (n, m), ``alphas`` (n,) chosen per fold, ``alpha_full`` chosen on all samples.
+    nan for a column without variance, ``predictions`` (n, m), ``alphas`` (n,) chosen per fold, ``alpha_full`` chosen on all samples.
     """
     X = np.asarray(X, float)
     Y = np.asarray(Y, float)
@@ -432,7 +436,8 @@ def ridge_loo(X: np.ndarray, Y: np.ndarray, *, alphas=DEFAULT_ALPHAS) -> dict:
         chosen[i] = a
         pred[i] = _ridge_solve(X[keep], Y[keep], a)(X[i : i + 1])[0]
     ss = np.sum((Y - Y.mean(0)) ** 2, axis=0)
-    r2 = 1.0 - np.sum((Y - pred) ** 2, axis=0) / np.where(ss > 0, ss, np.nan)
+    # columns without variance (a PCA mode of round-off size) have no R^2: nan (null in atlas.json)
+    r2 = 1.0 - np.sum((Y - pred) ** 2, axis=0) / np.where(ss > 1e-12 * max(float(ss.max()), 1e-300), ss, np.nan)
     return {"r2": r2[0] if squeeze else r2, "predictions": pred[:, 0] if squeeze else pred,
             "alphas": chosen, "alpha_full": float(_gcv_alpha(X, Y, alphas))}
 
