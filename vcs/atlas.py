@@ -415,7 +415,8 @@ def ridge_loo(X: np.ndarray, Y: np.ndarray, *, alphas=DEFAULT_ALPHAS) -> dict:
     Returns
     -------
     dict: ``r2`` (m,) = 1 - sum (y - y_loo)^2 / sum (y - mean y)^2 per column (can be negative),
-    nan for a column without variance, ``predictions`` (n, m), ``alphas`` (n,) chosen per fold, ``alpha_full`` chosen on all samples.
+    nan for a column without variance; ``predictions`` (n, m); ``alphas`` (n,) chosen per fold;
+    ``alpha_full`` chosen on all samples.
     """
     X = np.asarray(X, float)
     Y = np.asarray(Y, float)
