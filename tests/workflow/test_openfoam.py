@@ -154,6 +154,9 @@ def test_hagen_poiseuille(poiseuille_serial):
     assert st["iterations"] < 800
     assert st["mass_imbalance"] < 1e-6
     assert st["inlet"]["flux_error_rel"] < 1e-9
+    pf = st["pyfoam_log_analysis"]            # PyFoam's analyzer agrees with the own log parser
+    assert pf["last_iteration"] == pytest.approx(st["iterations"])
+    assert pf["initial_residuals"]["p"] == pytest.approx(st["final_residuals"]["p"])
     for f in ("residuals.csv", "residuals.png", "status.json", "logs/log.snappyHexMesh", "logs/log.checkMesh",
               "logs/log.simpleFoam"):
         assert (tmp / "serial" / f).exists(), f

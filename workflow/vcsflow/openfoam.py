@@ -607,6 +607,22 @@ def _solver_failure(log: Path, stage: str) -> str:
     return f"simpleFoam ({stage}) exited with an error (see logs/{log.name})"
 
 
+def _pyfoam_check(log: Path) -> dict | None:
+    """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration)."""
+    try:
+        from PyFoam.LogAnalysis.BoundingLogAnalyzer import BoundingLogAnalyzer
+        a = BoundingLogAnalyzer(doFiles=False, doTimelines=True)
+        with open(log) as fh:
+            a.analyze(fh)
+        lin = a.getAnalyzer("Linear").getCurrentData()
+        cont = a.getAnalyzer("Continuity").getCurrentData()
+        return {"log": log.name, "last_iteration": float(a.getTime()),
+                "initial_residuals": {k: v for k, v in lin.items() if "_" not in k},
+                "continuity": cont}
+    except Exception as exc:  # noqa: BLE001 - optional cross-check only
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
 def _collect(case_dir: Path, status: dict, logs: list[Path], state: dict) -> None:
     rows: list[dict] = []
     stage_iters = {}
@@ -627,6 +643,7 @@ def _collect(case_dir: Path, status: dict, logs: list[Path], state: dict) -> Non
             avg_rows = foam_io.parse_solver_log(logs[-1])["rows"]
             status["averaging"] = {"max_initial_residual": float(max(max(r.get("p", 0), r.get("U", 0)) for r in avg_rows))
                                    if avg_rows else None}
+    status["pyfoam_log_analysis"] = _pyfoam_check(logs[-1]) if logs else None
     rho = float(state["cfd"]["physics"]["rho"])
     flows = {}
     for p in state["patches"]:
