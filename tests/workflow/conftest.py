@@ -117,6 +117,17 @@ def make_workdir(path: Path, rows: list[dict]) -> Workdir:
 
 
 @pytest.fixture
+def workdir_factory():
+    """make_workdir(path, rows) -> Workdir (config from config/config.yaml, sheet from rows)."""
+    return make_workdir
+
+
+@pytest.fixture
+def repo() -> Path:
+    return REPO
+
+
+@pytest.fixture
 def cohort(tmp_path) -> Workdir:
     """Three patients with (fake) meshes, one of them with spaces in its path."""
     meshes = tmp_path / "meshes"

@@ -11,18 +11,17 @@ import shutil
 import pytest
 import yaml
 
-from conftest import REPO, Workdir, make_workdir
 
 HAVE_FOAM = shutil.which("simpleFoam") is not None
 SEEDS = (0, 1, 2, 3)
 IDS = [f"demo_aorta_{s}" for s in SEEDS]
 
 
-def _ci_workdir(path) -> Workdir:
+def _ci_workdir(path, make_workdir, repo):
     wd = make_workdir(path, [{"id": f"demo_aorta_{s}", "mesh": f"resources/demo/aorta_seed{s}.stl", "units": "mm"}
                              for s in SEEDS])
     cfg = wd.config()
-    ci = yaml.safe_load((REPO / "config" / "ci.yaml").read_text())
+    ci = yaml.safe_load((repo / "config" / "ci.yaml").read_text())
     ci.pop("patients")
     for key, value in ci.items():
         if isinstance(value, dict) and isinstance(cfg.get(key), dict):
@@ -39,9 +38,9 @@ def _ci_workdir(path) -> Workdir:
 
 @pytest.mark.openfoam
 @pytest.mark.skipif(not HAVE_FOAM, reason="OpenFOAM (simpleFoam) not installed; run scripts/install.sh")
-def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path):
-    wd = _ci_workdir(tmp_path)
-    profile = str(REPO / "profiles" / "local")
+def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path, workdir_factory, repo):
+    wd = _ci_workdir(tmp_path, workdir_factory, repo)
+    profile = str(repo / "profiles" / "local")
     wd.snakemake("--profile", profile, "--cores", "2", timeout=3600)
     res = wd.path / "results"
 
@@ -78,9 +77,9 @@ def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path):
     assert (res / "report.html").stat().st_size > 10_000, r.stderr
 
 
-def test_broken_mesh_fails_the_fit_with_one_line_in_the_log(tmp_path):
+def test_broken_mesh_fails_the_fit_with_one_line_in_the_log(tmp_path, workdir_factory):
     (tmp_path / "bad.stl").write_text("this is not an STL file\n")
-    wd = make_workdir(tmp_path, [{"id": "bad", "mesh": "bad.stl", "units": "mm"}])
+    wd = workdir_factory(tmp_path, [{"id": "bad", "mesh": "bad.stl", "units": "mm"}])
     r = wd.snakemake("--cores", "1", "results/patients/bad/fit/model.json", check=False, timeout=600)
     assert r.returncode != 0
     log = (tmp_path / "results" / "logs" / "vcs_fit" / "bad.log").read_text().strip().splitlines()

@@ -6,9 +6,12 @@ No OpenFOAM or VCS code runs: the outputs of a finished run are faked (empty fil
 from __future__ import annotations
 
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
-from conftest import REPO, Workdir, make_workdir
 
 PER_PATIENT = ["vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample"]
 IDS = ["P1", "P2", "P3"]
@@ -21,30 +24,30 @@ def chain(rules, ids=IDS):
 COHORT = {("atlas_build", None), ("all", None)}
 
 
-def test_fresh_cohort_plans_every_stage_once_per_patient(cohort: Workdir):
+def test_fresh_cohort_plans_every_stage_once_per_patient(cohort):
     assert cohort.planned_jobs() == chain(PER_PATIENT) | COHORT
 
 
-def test_finished_run_is_up_to_date(cohort: Workdir):
+def test_finished_run_is_up_to_date(cohort):
     cohort.fake_finished_run()
     r = cohort.snakemake("-n")
     assert "Nothing to be done" in r.stdout + r.stderr
 
 
-def test_editing_one_mesh_reruns_only_that_patient_and_the_atlas(cohort: Workdir):
+def test_editing_one_mesh_reruns_only_that_patient_and_the_atlas(cohort):
     cohort.fake_finished_run()
     with open(cohort.path / "meshes" / "p 2 scan.stl", "a") as fh:  # an edit, not just a touch:
         fh.write("solid edited\nendsolid edited\n")             # same bytes + newer mtime is no change
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P2"]) | COHORT
 
 
-def test_cfd_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort: Workdir):
+def test_cfd_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     cohort.fake_finished_run()
     cohort.update_config("cfd", "solver", "max_iterations", 777)
     assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
 
 
-def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort: Workdir):
+def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     cohort.fake_finished_run()
     cohort.update_config("cfd", "mesh", "cell_size", 2.0e-3)
     planned = cohort.planned_jobs()
@@ -52,31 +55,31 @@ def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort: Workdir):
     assert not {job for job in planned if job[0] in ("vcs_fit", "vcs_wall")}
 
 
-def test_knots_rerun_everything_downstream_of_the_fit(cohort: Workdir):
+def test_knots_rerun_everything_downstream_of_the_fit(cohort):
     cohort.fake_finished_run()
     cohort.update_config("vcs", "K", 15)
     assert cohort.planned_jobs() == chain(PER_PATIENT) | COHORT
 
 
-def test_wall_resolution_reruns_from_the_wall_stl(cohort: Workdir):
+def test_wall_resolution_reruns_from_the_wall_stl(cohort):
     cohort.fake_finished_run()
     cohort.update_config("wall", "n_theta", 48)
     assert cohort.planned_jobs() == chain(PER_PATIENT[1:]) | COHORT
 
 
-def test_grid_size_reruns_sampling_and_atlas_only(cohort: Workdir):
+def test_grid_size_reruns_sampling_and_atlas_only(cohort):
     cohort.fake_finished_run()
     cohort.update_config("grid", "n_rho", 5)
     assert cohort.planned_jobs() == chain(["fields_sample"]) | COHORT
 
 
-def test_atlas_option_reruns_the_atlas_only(cohort: Workdir):
+def test_atlas_option_reruns_the_atlas_only(cohort):
     cohort.fake_finished_run()
     cohort.update_config("atlas", "n_modes", 2)
     assert cohort.planned_jobs() == COHORT
 
 
-def test_changing_how_one_patients_ends_are_given_reruns_that_patient(cohort: Workdir):
+def test_changing_how_one_patients_ends_are_given_reruns_that_patient(cohort):
     cohort.fake_finished_run()
     cohort.write_sheet([
         {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
@@ -86,7 +89,7 @@ def test_changing_how_one_patients_ends_are_given_reruns_that_patient(cohort: Wo
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P2"]) | COHORT
 
 
-def test_adding_a_patient_runs_its_chain_and_the_atlas(cohort: Workdir):
+def test_adding_a_patient_runs_its_chain_and_the_atlas(cohort):
     cohort.fake_finished_run()
     (cohort.path / "meshes" / "p4.stl").write_text("solid empty\nendsolid empty\n")
     cohort.write_sheet([
@@ -98,7 +101,7 @@ def test_adding_a_patient_runs_its_chain_and_the_atlas(cohort: Workdir):
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P4"]) | COHORT
 
 
-def test_mesh_path_with_spaces_is_quoted(cohort: Workdir):
+def test_mesh_path_with_spaces_is_quoted(cohort):
     r = cohort.snakemake("-n", "-p", "--forcerun", "vcs_fit")
     fit_cmds = [ln for ln in (r.stdout + r.stderr).splitlines() if ln.lstrip().startswith("vcs fit")
                 or "vcs fit " in ln]
@@ -107,20 +110,17 @@ def test_mesh_path_with_spaces_is_quoted(cohort: Workdir):
     assert "--inlet 0,0,0 --outlet 0,0,100" in p2[0]
 
 
-def test_demo_rows_generate_their_phantoms(tmp_path):
-    wd = make_workdir(tmp_path, [{"id": f"demo_{s}", "mesh": f"resources/demo/aorta_seed{s}.stl", "units": "mm"}
+def test_demo_rows_generate_their_phantoms(tmp_path, workdir_factory):
+    wd = workdir_factory(tmp_path, [{"id": f"demo_{s}", "mesh": f"resources/demo/aorta_seed{s}.stl", "units": "mm"}
                                  for s in (0, 1, 2)])
     planned = wd.planned_jobs()
     assert {("vcs_phantom", f"aorta_seed{s}") for s in (0, 1, 2)} <= planned
     assert chain(PER_PATIENT, ["demo_0", "demo_1", "demo_2"]) | COHORT <= planned
 
 
-def test_default_config_is_the_eight_phantom_demo():
-    from conftest import SNAKEFILE, SNAKEMAKE
-    import subprocess
-
-    r = subprocess.run([str(SNAKEMAKE), "-s", str(SNAKEFILE), "-d", str(REPO), "-n", "--quiet", "rules",
-                        "--forceall"], capture_output=True, text=True, cwd=REPO, timeout=300)
+def test_default_config_is_the_eight_phantom_demo(repo):
+    r = subprocess.run([str(Path(sys.executable).parent / "snakemake"), "-s", str(repo / "Snakefile"), "-d", str(repo),
+                        "-n", "--quiet", "rules", "--forceall"], capture_output=True, text=True, cwd=repo, timeout=300)
     assert r.returncode == 0, r.stderr
     counts = dict(ln.split()[:2] for ln in r.stdout.splitlines() if ln.split()[:1] and ln.split()[0] in
                   ("vcs_phantom", "vcs_fit", "openfoam_solve", "atlas_build"))
@@ -130,7 +130,7 @@ def test_default_config_is_the_eight_phantom_demo():
 # ------------------------------------------------------------------ one-line errors
 
 
-def _one_line_error(wd: Workdir) -> str:
+def _one_line_error(wd) -> str:
     r = wd.snakemake("-n", check=False)
     assert r.returncode != 0
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
@@ -140,40 +140,40 @@ def _one_line_error(wd: Workdir) -> str:
 
 
 @pytest.mark.parametrize("bad_id", ["P 1", "P/1", "P.1", "P1;rm"])
-def test_bad_patient_id_fails_with_one_line(cohort: Workdir, bad_id):
+def test_bad_patient_id_fails_with_one_line(cohort, bad_id):
     cohort.write_sheet([{"id": bad_id, "mesh": "meshes/p1.stl"}])
     msg = _one_line_error(cohort)
     assert f"id '{bad_id}'" in msg and "A-Za-z0-9_-" in msg and "line 3" in msg
 
 
-def test_duplicate_patient_id_fails_with_one_line(cohort: Workdir):
+def test_duplicate_patient_id_fails_with_one_line(cohort):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl"}, {"id": "P1", "mesh": "meshes/p3.stl"}])
     assert "already used on line 3" in _one_line_error(cohort)
 
 
-def test_missing_mesh_fails_with_one_line(cohort: Workdir):
+def test_missing_mesh_fails_with_one_line(cohort):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/nope.stl"}])
     assert "mesh 'meshes/nope.stl' not found" in _one_line_error(cohort)
 
 
-def test_ends_given_twice_fail_with_one_line(cohort: Workdir):
+def test_ends_given_twice_fail_with_one_line(cohort):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": "0,0,0", "outlet": "1,1,1",
                          "inlet_cap": "meshes/p3.stl", "outlet_cap": "meshes/p3.stl"}])
     assert "not both" in _one_line_error(cohort)
 
 
-def test_half_given_ends_fail_with_one_line(cohort: Workdir):
+def test_half_given_ends_fail_with_one_line(cohort):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": "0,0,0"}])
     assert "both inlet and outlet" in _one_line_error(cohort)
 
 
-def test_bad_config_value_fails_with_one_line(cohort: Workdir):
+def test_bad_config_value_fails_with_one_line(cohort):
     cohort.update_config("cfd", "ranks", 0)
     msg = _one_line_error(cohort)
     assert "cfd > ranks" in msg and "minimum of 1" in msg
 
 
-def test_unknown_config_key_fails_with_one_line(cohort: Workdir):
+def test_unknown_config_key_fails_with_one_line(cohort):
     cohort.update_config("cfd", "mesh", "cellsize", 1.0)
     assert "'cellsize' was unexpected" in _one_line_error(cohort)
 
@@ -181,7 +181,7 @@ def test_unknown_config_key_fails_with_one_line(cohort: Workdir):
 # ------------------------------------------------------------------ lint
 
 
-def test_lint_reports_nothing_but_the_software_environment(cohort: Workdir):
+def test_lint_reports_nothing_but_the_software_environment(cohort):
     """`snakemake --lint` finds nothing to fix. The only lint left asks for a conda env or
     container per rule; the software stack is the pinned venv + Debian OpenFOAM of
     scripts/install.sh, recorded in results/provenance.json."""
