@@ -7,7 +7,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
 export WM_PROJECT_DIR=${WM_PROJECT_DIR:-/usr/share/openfoam}
-smk=(.venv/bin/snakemake --profile profiles/local --configfile config/config.yaml "$@")
+# config/config.yaml is the Snakefile's configfile; a --configfile in "$@" is merged over it
+smk=(.venv/bin/snakemake --profile profiles/local "$@")
 
 rc=0
 "${smk[@]}" || rc=$?
