@@ -74,6 +74,8 @@ def cmd_fit(args) -> None:
         msg += (f", residual mean {report['residual_mean_mm']:.4f} mm over {report['n_points_used']}"
                 f"/{report['n_wall_points']} wall points")
     print(msg + f" -> {out}")
+    for w in report["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
 
 
 def cmd_coords(args) -> None:

@@ -43,6 +43,7 @@ class Ends:
     closed_faces: np.ndarray
     n_open_loops: int
     notes: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
 
 
 def edge_topology(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -164,13 +165,15 @@ def find_ends(
     inlet = None if inlet is None else np.asarray(inlet, float)
     outlet = None if outlet is None else np.asarray(outlet, float)
     notes: list[str] = []
+    warnings: list[str] = []
     n_faces = len(faces)
     wall_mask = np.ones(n_faces, bool)
 
     edges, counts = edge_topology(faces)
     n_nonmanifold = int((counts > 2).sum())
     if n_nonmanifold:
-        notes.append(f"{n_nonmanifold} non-manifold edges (used by more than two triangles)")
+        warnings.append(f"{n_nonmanifold} non-manifold edges (used by more than two triangles); "
+                        "results near them may be unreliable: repair the mesh")
 
     # (b) labelled caps in a cell array
     cap_ends: list[End] = []
@@ -202,6 +205,13 @@ def find_ends(
     for loop in loops:
         c, n, a = polygon_properties(vertices[loop])
         loop_ends.append(End(c, n, float(np.sqrt(a / np.pi)), f"open loop ({len(loop)} edges)"))
+    if len(loop_ends) >= 3:  # small openings are holes in the wall, not ends
+        r_big = max(e.radius for e in loop_ends)
+        holes = [e.radius < 0.2 * r_big for e in loop_ends]
+        if any(holes):
+            warnings.append(f"{sum(holes)} small opening(s) (holes) in the wall closed for the lumen; "
+                            "their rims are wall points")
+            loop_ends = [e for e, h in zip(loop_ends, holes) if not h]
     closed_v, cap_f = _fan_caps(vertices, loops)
     closed_f = np.concatenate([faces, cap_f])
 
@@ -215,7 +225,7 @@ def find_ends(
             raise VCSInputError("give both --inlet-cap and --outlet-cap (or neither)")
         a = _end_from_faces(*inlet_cap, "inlet cap file")
         b = _end_from_faces(*outlet_cap, "outlet cap file")
-        return Ends(orient(a), orient(b), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes)
+        return Ends(orient(a), orient(b), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes, warnings)
 
     for cands, method in ((cap_ends, "labelled_caps"), (loop_ends, "open_loops")):
         if len(cands) < 2:
@@ -242,7 +252,7 @@ def find_ends(
             i_in = _pick(cands, None)
             i_out = 1 - i_in
         notes.append(f"{len(cands)} candidate ends; inlet = {cands[i_in].source}, outlet = {cands[i_out].source}")
-        return Ends(orient(cands[i_in]), orient(cands[i_out]), method, wall_mask, closed_v, closed_f, len(loops), notes)
+        return Ends(orient(cands[i_in]), orient(cands[i_out]), method, wall_mask, closed_v, closed_f, len(loops), notes, warnings)
 
     if inlet is None or outlet is None:
         if len(loops) == 0:
@@ -257,5 +267,5 @@ def find_ends(
     notes.append("ends given as explicit points")
     return Ends(
         End(inlet, None, None, "point"), End(outlet, None, None, "point"), "points",
-        wall_mask, closed_v, closed_f, len(loops), notes,
+        wall_mask, closed_v, closed_f, len(loops), notes, warnings,
     )

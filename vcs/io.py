@@ -45,6 +45,7 @@ class Surface:
     units: str = "mm"
     units_source: str = "given"
     path: str = ""
+    warnings: tuple = ()
 
     @property
     def scale_to_mm(self) -> float:
@@ -128,14 +129,34 @@ def read_surface(path, units: str = "auto") -> Surface:
         for name in mesh.cell_data.keys()
         if np.asarray(mesh.cell_data[name]).ndim == 1
     }
+    warnings = []
+    tri = vertices[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    degenerate = (area2 <= 1e-12 * max(float(np.ptp(vertices)), 1e-300) ** 2) | (faces[:, 0] == faces[:, 1]) \
+        | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    if degenerate.any():
+        warnings.append(f"{int(degenerate.sum())} degenerate (zero-area) triangles removed")
+        faces = faces[~degenerate]
+        cell_data = {k: v[~degenerate] for k, v in cell_data.items()}
+        if len(faces) == 0:
+            raise VCSInputError(f"'{path}' has only degenerate triangles; export the surface again")
     faces, winding = _consistent_winding(vertices, faces)
+    if winding:
+        warnings.append("inconsistent triangle winding repaired")
+    extent = float(np.ptp(vertices, axis=0).max())
     if units == "auto":
-        extent = float(np.ptp(vertices, axis=0).max())
         units, source = guess_units(extent)
     else:
         source = "given"
+        extent_mm = extent * UNIT_TO_MM[units]
+        if not 5.0 <= extent_mm <= 3000.0:
+            better = guess_units(extent)[0]
+            raise VCSInputError(
+                f"with --units {units} the mesh spans {extent_mm:.3g} mm, not a blood vessel; "
+                f"is it in {better}? give --units {better} (or auto)"
+            )
     vertices = vertices * UNIT_TO_MM[units]
-    return Surface(vertices, faces, cell_data, units, source, str(path))
+    return Surface(vertices, faces, cell_data, units, source, str(path), tuple(warnings))
 
 
 def _consistent_winding(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, bool]:

@@ -116,6 +116,30 @@ class VesselModel:
         return cls.from_dict(d)
 
 
+def largest_component(surf: Surface) -> Surface:
+    """Keep the connected component of largest area; the others are reported in ``warnings``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    f = surf.faces
+    n = len(surf.vertices)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    n_comp, lab = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
+    face_lab = lab[f[:, 0]]
+    used = np.unique(face_lab)
+    if len(used) <= 1:
+        return surf
+    tri = surf.vertices[f]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    per = np.bincount(face_lab, area)
+    keep_lab = int(np.argmax(per))
+    keep = face_lab == keep_lab
+    msg = (f"{len(used)} disconnected surface components; kept the largest ({keep.sum()} triangles, "
+           f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles")
+    return Surface(surf.vertices, f[keep], {k: v[keep] for k, v in surf.cell_data.items()}, surf.units,
+                   surf.units_source, surf.path, (*surf.warnings, msg))
+
+
 def parse_point(text: str | None, name: str) -> np.ndarray | None:
     """'x,y,z' -> (3,) array (None passes through)."""
     if text is None:
@@ -153,6 +177,7 @@ def fit_vessel(
     """
     t0 = time.perf_counter()
     surf = mesh if isinstance(mesh, Surface) else read_surface(mesh, units)
+    surf = largest_component(surf)
     s = surf.scale_to_mm
     p_in = parse_point(inlet, "inlet")
     p_out = parse_point(outlet, "outlet")
@@ -179,7 +204,18 @@ def fit_vessel(
         wall_faces = surf.faces[ends.wall_mask]
         wall_fit = fit_wall(vcs, surf.vertices, wall_faces, K=K, R=R)
     t_wall = time.perf_counter()
+    warnings = [*surf.warnings, *ends.warnings]
+    if wall_fit is not None:
+        wr = wall_fit.report
+        if wr["not_star_convex_fraction"] > 0.01:
+            warnings.append(f"{100 * wr['not_star_convex_fraction']:.1f}% of the wall is not star-convex about "
+                            "the centerline (e.g. a saccular aneurysm): left out of the wall model")
+        n_out = wr["points_not_used"]["outside_omega"]
+        if n_out > 0.01 * wr["n_wall_points"]:
+            warnings.append(f"{n_out} wall points ({100 * n_out / wr['n_wall_points']:.1f}%) are outside Omega "
+                            "(lumen radius above the centerline's radius of curvature, or closest point not unique)")
     report = {
+        "warnings": warnings,
         "mesh": str(surf.path),
         "units": surf.units,
         "units_source": surf.units_source,
