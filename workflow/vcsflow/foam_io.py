@@ -228,6 +228,18 @@ def last_function_value(case_dir: Path, name: str) -> float | None:
     return None
 
 
+def mean_function_value(case_dir: Path, name: str, after: float) -> float | None:
+    """Mean of postProcessing/<name>/*/*.dat rows with time > ``after`` (fallback averaging window)."""
+    root = Path(case_dir) / "postProcessing" / name
+    rows = [read_dat(f) for f in root.glob("*/*.dat")]
+    rows = [r for r in rows if r.shape[0] and r.shape[1] >= 2]
+    if not rows:
+        return None
+    arr = np.concatenate([r[:, :2] for r in rows])
+    sel = arr[arr[:, 0] > after]
+    return float(sel[:, 1].mean()) if sel.shape[0] else None
+
+
 def _isnum(s: str) -> bool:
     try:
         float(s)

@@ -567,7 +567,8 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
         status["reason"] = (f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
                             f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})")
         if sol.get("fallback") == "average" and int(sol["average_iterations"]) > 0:
-            end = int(last.get("time", sol["max_iterations"])) + int(sol["average_iterations"])
+            status["averaging_from"] = int(last.get("time", sol["max_iterations"]))
+            end = status["averaging_from"] + int(sol["average_iterations"])
             _render(case_dir, state, stage_files, end_time=end, residual_control=False, average=True)
             r = run(["simpleFoam"], "simpleFoam.average", ranks)
             logs.append(case_dir / "logs" / "log.simpleFoam.average")
@@ -645,16 +646,24 @@ def _collect(case_dir: Path, status: dict, logs: list[Path], state: dict) -> Non
                                    if avg_rows else None}
     status["pyfoam_log_analysis"] = _pyfoam_check(logs[-1]) if logs else None
     rho = float(state["cfd"]["physics"]["rho"])
+    avg_from = status.get("averaging_from")
+
+    def fo_value(name: str):
+        # fallback: mean over the averaging window (consistent with UMean/pMean); else last iteration
+        if avg_from is not None:
+            return foam_io.mean_function_value(case_dir, name, avg_from)
+        return foam_io.last_function_value(case_dir, name)
+
     flows = {}
     for p in state["patches"]:
         if p["role"] in ("inlet", "outlet"):
-            flows[p["name"]] = foam_io.last_function_value(case_dir, f"flowRate_{p['name']}")
+            flows[p["name"]] = fo_value(f"flowRate_{p['name']}")
     status["flow_rates"] = flows
     q_in = sum(v for k, v in flows.items() if v is not None and _role(k) == "inlet")
     q_out = sum(v for k, v in flows.items() if v is not None and _role(k) == "outlet")
     if q_in:
         status["mass_imbalance"] = abs(q_in + q_out) / abs(q_in)
-    pin = {p["name"]: foam_io.last_function_value(case_dir, f"pressure_{p['name']}") for p in state["patches"]
+    pin = {p["name"]: fo_value(f"pressure_{p['name']}") for p in state["patches"]
            if p["role"] in ("inlet", "outlet")}
     status["patch_pressure"] = pin
     pi = [v for k, v in pin.items() if _role(k) == "inlet" and v is not None]
