@@ -512,6 +512,9 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
                 if d.name == "postProcessing":
                     shutil.rmtree(d)
     shutil.rmtree(case_dir / "constant" / "polyMesh", ignore_errors=True)
+    for f in (case_dir / "logs").glob("log.*"):
+        f.unlink()
+    _render(case_dir, state, ["0/U", "0/p"])     # placeholder inlet until the mesh exists
 
     if run(["blockMesh"], "blockMesh").returncode != 0:
         return finish("blockMesh failed (see logs/log.blockMesh)")
