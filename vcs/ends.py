@@ -107,6 +107,16 @@ def _inward(center: np.ndarray, normal: np.ndarray, radius: float, vertices: np.
     return normal if np.sum(side) >= 0 else -normal
 
 
+def _wall_on_both_sides(vertices: np.ndarray, e: End) -> bool:
+    """True when the wall near an opening lies on both sides of its plane: a hole in the wall
+    (an open end has the whole vessel on one side)."""
+    d = vertices - e.center
+    near = np.linalg.norm(d, axis=1) < 2.5 * e.radius
+    side = d[near] @ e.normal
+    tol = 0.05 * e.radius
+    return min(np.mean(side > tol), np.mean(side < -tol)) > 0.1
+
+
 def _fan_caps(vertices: np.ndarray, loops: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Close every boundary loop with a triangle fan around its centroid."""
     new_v, new_f = [vertices], []
@@ -207,7 +217,7 @@ def find_ends(
         loop_ends.append(End(c, n, float(np.sqrt(a / np.pi)), f"open loop ({len(loop)} edges)"))
     if len(loop_ends) >= 3:  # small openings are holes in the wall, not ends
         r_big = max(e.radius for e in loop_ends)
-        holes = [e.radius < 0.2 * r_big for e in loop_ends]
+        holes = [e.radius < 0.2 * r_big or _wall_on_both_sides(vertices, e) for e in loop_ends]
         if any(holes):
             warnings.append(f"{sum(holes)} small opening(s) (holes) in the wall closed for the lumen; "
                             "their rims are wall points")

@@ -181,6 +181,8 @@ def fit_vessel(
     s = surf.scale_to_mm
     p_in = parse_point(inlet, "inlet")
     p_out = parse_point(outlet, "outlet")
+    if p_in is not None and p_out is not None and np.linalg.norm((p_in - p_out) * s) < 1.0:
+        raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
     caps = []
     for cap in (inlet_cap, outlet_cap):
         if cap is None:
