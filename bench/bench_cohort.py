@@ -59,14 +59,15 @@ def main(argv=None) -> int:
     sheet.write_text("\n".join(rows) + "\n")
     override = work / "bench.yaml"
     override.write_text(yaml.safe_dump({"patients": str(sheet)}))
-    base = [str(SNAKEMAKE), "-s", str(REPO / "Snakefile"), "-d", str(work), "--profile", str(REPO / "profiles" / "local"),
+    base = ["-s", str(REPO / "Snakefile"), "-d", str(work), "--profile", str(REPO / "profiles" / "local"),
             "--cores", str(args.cores), "--configfile", str(REPO / "config" / "config.yaml"),
             str(Path(args.configfile).resolve()), str(override)]
     phantoms = [f"resources/demo/aorta_seed{s}.stl" for s in range(args.n)]
-    subprocess.run(base + ["--quiet", "all", *phantoms], check=True, cwd=work)
+    # targets before the options: `--quiet` takes optional values
+    subprocess.run([str(SNAKEMAKE), *phantoms, *base, "--quiet"], check=True, cwd=work)
 
     t0 = time.perf_counter()
-    r = subprocess.run(base + ["--quiet", "all"], cwd=work)
+    r = subprocess.run([str(SNAKEMAKE), "all", *base, "--quiet"], cwd=work)
     wall = time.perf_counter() - t0
     results = work / "results"
     bench = read_benchmarks(results)
