@@ -140,7 +140,7 @@ def read_surface(path, units: str = "auto") -> Surface:
         cell_data = {k: v[~degenerate] for k, v in cell_data.items()}
         if len(faces) == 0:
             raise VCSInputError(f"'{path}' has only degenerate triangles; export the surface again")
-    faces, winding = _consistent_winding(vertices, faces)
+    faces, winding = consistent_winding(vertices, faces)
     if winding:
         warnings.append("inconsistent triangle winding repaired")
     extent = float(np.ptp(vertices, axis=0).max())
@@ -159,7 +159,7 @@ def read_surface(path, units: str = "auto") -> Surface:
     return Surface(vertices, faces, cell_data, units, source, str(path), tuple(warnings))
 
 
-def _consistent_winding(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, bool]:
+def consistent_winding(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, bool]:
     """Make triangle winding consistent across shared manifold edges. Returns (faces, changed).
 
     Some exporters (e.g. STL from segmentation tools) mix windings; normals, and the star-convexity

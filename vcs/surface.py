@@ -140,12 +140,9 @@ def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
 
 def _orient_outward(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Make every face consistent with its neighbours and the enclosed volume positive."""
-    import trimesh  # mesh utilities: consistent winding
+    from vcs.io import consistent_winding
 
-    tm = trimesh.Trimesh(V, F, process=False, validate=False)
-    if not tm.is_winding_consistent:
-        trimesh.repair.fix_winding(tm)
-    F = np.asarray(tm.faces)
+    F, _ = consistent_winding(V, F)
     if signed_volume(V, F) < 0:
         F = F[:, ::-1]
     return F
