@@ -10,5 +10,7 @@ rule openfoam_case:
         cfd=cfd_params(),
     log:
         "results/logs/openfoam_case/{id}.log",
+    benchmark:
+        "results/benchmarks/openfoam_case/{id}.tsv"
     script:
         "../scripts/openfoam_case.py"

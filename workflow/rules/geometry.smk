@@ -56,6 +56,8 @@ rule vcs_wall:
         extend_outlet=config["wall"]["extend_outlet"],
     log:
         "results/logs/vcs_wall/{id}.log",
+    benchmark:
+        "results/benchmarks/vcs_wall/{id}.tsv"
     shell:
         "vcs wall {input.model:q} -o {output.stl:q} --units m {params.n_tau} --n-theta {params.n_theta}"
         " --extend-inlet {params.extend_inlet} --extend-outlet {params.extend_outlet} > {log:q} 2>&1"

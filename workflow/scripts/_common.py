@@ -5,6 +5,7 @@ Imported by the scripts of workflow/scripts/ (``sys.path`` gets ``snakemake.scri
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import traceback
 
@@ -12,6 +13,8 @@ import traceback
 def setup(snakemake, name: str) -> logging.Logger:
     """Send stderr and logging of this job to its log file; return the script's logger."""
     log_file = open(snakemake.log[0], "a", buffering=1)
+    sys.stderr.flush()
+    os.dup2(log_file.fileno(), 2)  # C-level stderr too (VTK, OpenFOAM readers)
     sys.stderr = log_file
     logging.basicConfig(stream=log_file, level=logging.INFO, force=True,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
