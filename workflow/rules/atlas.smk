@@ -5,6 +5,8 @@
 
 
 rule atlas_build:
+    conda:
+        "../envs/vcs.yaml"
     input:
         models=patient_files("results/patients/{id}/fit/model.json"),
         fields=patient_files("results/patients/{id}/fields.npz"),

@@ -2,6 +2,8 @@
 
 
 rule openfoam_case:
+    conda:
+        "../envs/vcs.yaml"
     input:
         stl="results/patients/{id}/wall/wall.stl",
     output:

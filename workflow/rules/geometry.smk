@@ -2,6 +2,8 @@
 
 
 rule vcs_phantom:
+    conda:
+        "../envs/vcs.yaml"
     # Synthetic vessel surface (mm, open ends) for the demo cohort; only for sheet rows whose
     # mesh is resources/demo/<kind>_seed<N>.stl.
     output:
@@ -17,6 +19,8 @@ rule vcs_phantom:
 
 
 rule vcs_fit:
+    conda:
+        "../envs/vcs.yaml"
     # Centerline B-spline + RMF frame + wall model rho_w of one patient. Bad input (unreadable
     # mesh, ends not found) fails the job with one line in the log (exit code 2).
     input:
@@ -44,6 +48,8 @@ rule vcs_fit:
 
 
 rule vcs_wall:
+    conda:
+        "../envs/vcs.yaml"
     # The model wall x(tau, theta) (Eq. 8) as a closed multi-solid STL (wall/inlet/outlet) in metres.
     input:
         model="results/patients/{id}/fit/model.json",

@@ -2,6 +2,8 @@
 
 
 rule fields_sample:
+    conda:
+        "../envs/vcs.yaml"
     input:
         case="results/patients/{id}/case",
         status="results/patients/{id}/status.json",

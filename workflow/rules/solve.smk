@@ -5,6 +5,8 @@
 
 
 rule openfoam_solve:
+    conda:
+        "../envs/vcs.yaml"
     input:
         setup="results/patients/{id}/case_setup",
     output:
