@@ -13,6 +13,10 @@ from pathlib import Path
 import pytest
 import yaml
 
+# the real one-node SLURM cluster fixture `slurm_cluster` (tests/ is not a package)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from slurm_cluster import slurm_cluster  # noqa: E402,F401
+
 REPO = Path(__file__).resolve().parents[2]
 SNAKEFILE = REPO / "Snakefile"
 SNAKEMAKE = Path(sys.executable).parent / "snakemake"
