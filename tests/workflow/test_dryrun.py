@@ -49,7 +49,8 @@ def test_cfd_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort):
 
 def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     cohort.fake_finished_run()
-    cohort.update_config("cfd", "mesh", "cell_size", 2.0e-3)
+    current = cohort.config().get("cfd", {}).get("mesh", {}).get("cell_size", 2.0e-3)
+    cohort.update_config("cfd", "mesh", "cell_size", 1.5 * current)  # a real change, whatever the default
     planned = cohort.planned_jobs()
     assert planned == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
     assert not {job for job in planned if job[0] in ("vcs_fit", "vcs_wall")}
