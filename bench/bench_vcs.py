@@ -44,9 +44,19 @@ def cases():
         pass
 
 
+def machine() -> str:
+    """CPU model, cores, memory and load, for the figures' context."""
+    import os
+
+    cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")),
+               platform.machine())
+    mem = next((int(ln.split()[1]) // 1024**2 for ln in open("/proc/meminfo") if ln.startswith("MemTotal")), 0)
+    return (f"{cpu}, {os.cpu_count()} cores, {mem} GB, load {os.getloadavg()[0]:.1f}, "
+            f"Python {platform.python_version()}")
+
+
 def main():
-    print(f"machine: {platform.node()}, {platform.processor() or platform.machine()}, "
-          f"Python {platform.python_version()}, best of 3")
+    print(f"machine: {machine()}; best of 3")
     print("| mesh | triangles | VCS build (centerline+frame) s | wall fit K=19 R=15 s | whole `vcs fit` s |")
     print("|---|---|---|---|---|")
     last = None
