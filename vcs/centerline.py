@@ -161,26 +161,46 @@ def uniform_knots(n_interior: int, k: int = 3) -> np.ndarray:
     return np.concatenate([np.zeros(k + 1), inner, np.ones(k + 1)])
 
 
-def _lsq_fixed_ends(u, pts, t, p0, p1, smooth=1e-6):
-    """Least-squares cubic B-spline through data (u, pts) with c(0) = p0 and c(1) = p1.
+def _lsq_fixed_ends(u, pts, t, p0, p1, smooth=1e-6, d0=None, d1=None):
+    """Least-squares cubic B-spline through data (u, pts) with c(0) = p0 and c(1) = p1, and, when
+    the unit directions ``d0``/``d1`` are given, c'(0) parallel to d0 and c'(1) parallel to d1.
 
-    A small second-difference penalty on the control points (weight ``smooth`` relative to the
-    data term) keeps knot spans without data well-posed.
+    The control points are c = C0 + G z with free parameters z: all interior points, except that
+    with end directions c_1 = p0 + s0 d0 and c_(n-2) = p1 - s1 d1 (s0, s1 free), so the curve
+    leaves and meets the end planes perpendicularly. A small second-difference penalty on the
+    control points (weight ``smooth`` relative to the data term) keeps knot spans without data
+    well-posed.
     """
-    B = BSpline.design_matrix(u, t, 3).tocsc()
+    B = BSpline.design_matrix(u, t, 3).toarray()
     n = B.shape[1]
-    rhs = pts - B[:, [0]].toarray() * p0 - B[:, [n - 1]].toarray() * p1
-    A = B[:, 1:-1].toarray()
+    C0 = np.zeros((n, 3))
+    C0[0], C0[-1] = p0, p1
+    cols = []  # each free parameter: an (n, 3) pattern of its effect on the control points
+    lo, hi = 1, n - 1
+    if d0 is not None:
+        C0[1] = p0
+        g = np.zeros((n, 3)); g[1] = d0; cols.append(g)
+        lo = 2
+    if d1 is not None:
+        C0[n - 2] = p1
+        g = np.zeros((n, 3)); g[n - 2] = -np.asarray(d1); cols.append(g)
+        hi = n - 2
+    for j in range(lo, hi):
+        for k in range(3):
+            g = np.zeros((n, 3)); g[j, k] = 1.0; cols.append(g)
+    G = np.stack(cols, axis=-1)  # (n, 3, nz)
     D = np.diff(np.eye(n), 2, axis=0)
+    A = np.einsum("in,nkz->ikz", B, G).reshape(-1, G.shape[-1])
+    r = (pts - B @ C0).reshape(-1)
+    P = np.einsum("in,nkz->ikz", D, G).reshape(-1, G.shape[-1])
+    q = -(D @ C0).reshape(-1)
     lam = smooth * len(u)
-    Dm = D[:, 1:-1]
-    drhs = -(D[:, [0]] * p0 + D[:, [n - 1]] * p1)
-    M = A.T @ A + lam * Dm.T @ Dm
-    c_mid = np.linalg.solve(M, A.T @ rhs + lam * Dm.T @ drhs)
-    return BSpline(t, np.vstack([p0, c_mid, p1]), 3)
+    z = np.linalg.solve(A.T @ A + lam * P.T @ P, A.T @ r + lam * P.T @ q)
+    return BSpline(t, C0 + G @ z, 3)
 
 
-def fit_centerline(points: np.ndarray, n_knots: int = 9, *, n_resample: int = 2000) -> BSpline:
+def fit_centerline(points: np.ndarray, n_knots: int = 9, *, n_resample: int = 2000,
+                   end_directions: tuple | None = None) -> BSpline:
     """Cubic B-spline centerline with ``n_knots`` uniform interior knots, arc-length parametrised.
 
     Paper Section 2.2.1 (centerline c(tau), Eq. 1): a least-squares fit to the path points with the
@@ -193,6 +213,9 @@ def fit_centerline(points: np.ndarray, n_knots: int = 9, *, n_resample: int = 20
         Ordered path from p_A to p_B (first and last are kept exactly).
     n_knots : int
         Number of uniform interior knots L; the curve has L + 4 control points.
+    end_directions : (d0, d1) or None
+        Unit tangent directions imposed at tau = 0 and 1 (the end planes' normals, along the flow),
+        so that the normal planes of the curve at its ends are the end planes themselves.
     """
     pts = np.asarray(points, float)
     seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
@@ -204,13 +227,14 @@ def fit_centerline(points: np.ndarray, n_knots: int = 9, *, n_resample: int = 20
     u /= u[-1]
     t = uniform_knots(n_knots)
     p0, p1 = pts[0], pts[-1]
-    curve = _lsq_fixed_ends(u, pts, t, p0, p1)
+    d0, d1 = end_directions if end_directions is not None else (None, None)
+    curve = _lsq_fixed_ends(u, pts, t, p0, p1, d0=d0, d1=d1)
     for _ in range(2):  # re-parametrise by arc length (two passes make |c'| constant to <0.1%)
         dense = np.linspace(0, 1, 8 * n_resample + 1)
         s = arc_length_table(curve, dense)
         tau = np.linspace(0, 1, n_resample + 1)
         u_of_tau = np.interp(tau * s[-1], s, dense)
-        curve = _lsq_fixed_ends(tau, curve(u_of_tau), t, p0, p1, smooth=1e-9)
+        curve = _lsq_fixed_ends(tau, curve(u_of_tau), t, p0, p1, smooth=1e-9, d0=d0, d1=d1)
     return curve
 
 

@@ -89,7 +89,10 @@ class VesselCoordinateSystem:
         path = astar_path(lumen, start, goal)
         t_path = time.perf_counter()
         pts = np.vstack([inlet.center, lumen.centers(path), outlet.center])
-        curve = fit_centerline(pts, n_knots)
+        dirs = None
+        if inlet.normal is not None and outlet.normal is not None:  # end planes known: meet them square
+            dirs = (inlet.normal, -outlet.normal)
+        curve = fit_centerline(pts, n_knots, end_directions=dirs)
         t_fit = time.perf_counter()
 
         wall_faces = faces[ends.wall_mask]
@@ -100,7 +103,7 @@ class VesselCoordinateSystem:
         used = w_vert > 0
         shifts = []
         for _ in range(recentre_iterations):
-            curve, shift = _recentre(curve, vertices[used], w_vert[used], inlet.center, outlet.center, n_knots)
+            curve, shift = _recentre(curve, vertices[used], w_vert[used], inlet.center, outlet.center, n_knots, dirs)
             shifts.append(shift)
         t_recentre = time.perf_counter()
         d1 = curve.derivative()(0.0)
@@ -173,7 +176,7 @@ class VesselCoordinateSystem:
         return np.asarray(self.curve.c)
 
 
-def _recentre(curve, pts, w, p0, p1, n_knots, n_bins=None):
+def _recentre(curve, pts, w, p0, p1, n_knots, dirs=None, n_bins=None):
     """One re-centring step (see :meth:`VesselCoordinateSystem.from_surface`).
 
     Returns the refitted curve and the largest centre shift applied (mm).
@@ -215,7 +218,7 @@ def _recentre(curve, pts, w, p0, p1, n_knots, n_bins=None):
     shift *= np.minimum(1.0, cap / np.maximum(size, 1e-300))
     new = curve(tb) + shift
     order = np.argsort(tb)
-    fitted = fit_centerline(np.vstack([p0, new[order], p1]), n_knots)
+    fitted = fit_centerline(np.vstack([p0, new[order], p1]), n_knots, end_directions=dirs)
     return fitted, float(np.linalg.norm(shift, axis=1).max(initial=0.0))
 
 
