@@ -163,14 +163,16 @@ def _rings(faces: np.ndarray, n_vertices: int) -> sparse.csr_matrix:
 
 
 def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: int = 15,
-             smoothing: float = 1e-5, branch_rel: float = 0.12, orientation: float | None = None) -> WallFit:
+             smoothing: float = 1e-5, branch_rel: float = 0.12, grow_rel: float = 0.3,
+             orientation: float | None = None) -> WallFit:
     """Fit rho_w to the wall vertices of a section and compute residuals (Eqs. 5-7, 11).
 
     Vertices are left out, and counted by reason, when they lie beyond an end plane, outside
     Omega, when the ray from c(tau) does not reach them first (their outward normal faces the
     centerline: the wall is not star-convex there), or on a side branch (rho above the fit by more
     than ``branch_rel`` of the local radius, or above the median radius of their tau ring by more
-    than 2.5 ``branch_rel``; such regions are grown by three vertex rings).
+    than 2.5 ``branch_rel``; such regions are grown by ``grow_rel`` times the median vessel radius,
+    to take the flare of the ostium too).
     """
     used_v = np.unique(faces)
     pts_all = vertices
@@ -211,22 +213,40 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
             f"coefficients (K={K}, R={R}); the mesh is too coarse: remesh it finer or lower --K/--R"
         )
     adj = _rings(faces, len(vertices))
+    # branch regions are grown by ~ grow_rel x the vessel radius (the ostium's flare), in rings
+    edge_len = np.linalg.norm(tri[:, 0] - tri[:, 1], axis=1).mean()
+    n_grow = int(np.clip(np.ceil(grow_rel * np.nanmedian(rho[reason == 0]) / edge_len), 1, 30))
+    n_bins = 4 * (K + 4)
+    b = np.minimum((np.nan_to_num(tau) * n_bins).astype(int), n_bins - 1)
+
+    def ring_median() -> np.ndarray:
+        """Median radius of the wall kept so far, per tau ring (branches found so far left out)."""
+        med = np.full(n_bins, np.nan)
+        keep = reason == 0
+        for k in np.unique(b[keep]):
+            med[k] = np.median(rho[keep & (b == k)])
+        ok = np.isfinite(med)
+        return np.interp(np.arange(n_bins), np.flatnonzero(ok), med[ok]) if ok.any() else med
+
+    def fit() -> WallModel:
+        """LSQ on the kept wall; where branches were cut out, the ring's median radius stands in
+        (so the gap is filled like the wall around it instead of by unconstrained spline)."""
+        sel, fill = reason == 0, reason == 4
+        t_ = np.concatenate([tau[sel], tau[fill]])
+        a_ = np.concatenate([theta[sel], theta[fill]])
+        r_ = np.concatenate([rho[sel], ring_median()[b[fill]]])
+        return lsq_wall(t_, a_, r_, np.concatenate([w[sel], w[fill]]), K, R, smoothing)
+
     model = None
-    for _ in range(4):
-        sel = reason == 0
-        model = lsq_wall(tau[sel], theta[sel], rho[sel], w[sel], K, R, smoothing)
+    for _ in range(6):
+        model = fit()
         cand = (reason == 0) | (reason == 4)
         pred = model(np.nan_to_num(tau), np.nan_to_num(theta))
         # seeds: far above the fit, or far above the median radius of their tau ring (the fit
         # itself bends toward wide ostia, the ring median does not)
-        n_bins = 4 * (K + 4)
-        b = np.minimum((np.nan_to_num(tau) * n_bins).astype(int), n_bins - 1)
-        ring_med = np.full(n_bins, np.inf)
-        for k in np.unique(b[cand]):
-            ring_med[k] = np.median(rho[cand & (b == k)])
-        out = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * ring_med[b]))
+        out = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * ring_median()[b]))
         grown = out.copy()
-        for _ in range(3):
+        for _ in range(n_grow):
             grown = grown | (adj @ grown.astype(float) > 0)
         new_branch = cand & grown
         if np.array_equal(new_branch, reason == 4):
@@ -235,7 +255,7 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
         reason[new_branch] = 4
     sel = reason == 0
     if (reason == 4).any():
-        model = lsq_wall(tau[sel], theta[sel], rho[sel], w[sel], K, R, smoothing)
+        model = fit()
     residual = np.full(len(vertices), np.nan)
     ev = reason >= 0
     residual[ev] = np.abs(rho[ev] - model(np.nan_to_num(tau[ev]), np.nan_to_num(theta[ev])))

@@ -110,11 +110,11 @@ def test_aortacfd_branches_left_out(fits):
     assert art.stat().st_size > 10_000
 
 
-@pytest.mark.xfail(strict=True, reason="known: low bumps (up to ~1.6x the ring median radius) remain "
-                   "at the supra-aortic ostia; see README 'Known limitations'")
 def test_aortacfd_wall_has_no_bump_at_branches(fits):
     model, r, wf = fits["aortacfd"]
     br = wf.reason == 4
     tau_b, th_b = wf.tau[br], wf.theta[br]
     ring = model.wall(tau_b[:, None], np.linspace(0, 2 * np.pi, 64)[None, :])
-    assert np.all(model.wall(tau_b, th_b) <= 1.35 * np.median(ring, axis=1))
+    # where the branches were cut out, the wall stays within 15 % of its ring's median radius
+    # (no stump, no bump; measured: at most 1.08)
+    assert np.all(model.wall(tau_b, th_b) <= 1.15 * np.median(ring, axis=1))
