@@ -44,7 +44,7 @@ KINDS = ("tube", "torus", "helix", "aorta")
 #: The aorta's target edge is ``AORTA_EDGE_SCALE * resolution`` mm: at resolution = 1 its quad
 #: sides are ~1.25 mm (diagonals ~1.8 mm), which keeps every aorta below 60k triangles. The analytic
 #: kinds use ``resolution`` mm directly.
-AORTA_EDGE_SCALE = 1.25
+AORTA_EDGE_SCALE = 1.3
 
 # Gauss-Legendre nodes on [0, 1] for the quadratures that define the aorta's centreline.
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
@@ -444,6 +444,13 @@ def _aorta_sample(rng: np.random.Generator) -> dict:
     q["aneurysm_length_fraction"] = u(0.6, 1.0)
     q["aneurysm_eccentricity"] = u(0.0, 0.1)
     q["aneurysm_direction_deg"] = 180.0 + u(-30.0, 30.0)
+    # allometry: larger aortas are longer, with wider arches (body size, age-related dilation and
+    # elongation); 75 % of each length's position in its range follows the diameter's, so the
+    # diameter is the generator's dominant parameter (ranges and the random stream unchanged)
+    z = (q["ascending_diameter_mm"] - 28.0) / 20.0
+    for key, lo, hi in (("ascending_length_mm", 80.0, 105.0), ("arch_curvature_radius_mm", 28.0, 45.0),
+                        ("target_length_mm", 280.0, 340.0)):
+        q[key] = lo + (hi - lo) * (0.75 * z + 0.25 * (q[key] - lo) / (hi - lo))
     return q
 
 

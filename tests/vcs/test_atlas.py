@@ -203,8 +203,8 @@ def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
     """The generator's dominant parameter is recovered by the first shape mode.
 
     Measured (seeds 0-7, resolution 3, no aneurysm): |r| = 0.98 for the wall block's first mode,
-    0.87 for the paper's joint (centerline + wall) PCA, whose first mode also carries the arch
-    size and descending length that the generator varies independently of the diameter.
+    0.93 for the paper's joint (centerline + wall) PCA (the generator's lengths follow the
+    diameter allometrically; with random aneurysms the joint |r| drops to 0.88).
     """
     aligned, d = aorta_cohort
     wall = PCA.from_data(shape_matrix(aligned, "wall"), 3)
@@ -212,7 +212,7 @@ def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
     r_wall = abs(np.corrcoef(wall.scores[:, 0], d)[0, 1])
     r_joint = abs(np.corrcoef(joint.scores[:, 0], d)[0, 1])
     assert r_wall >= 0.9, r_wall
-    assert r_joint >= 0.8, r_joint
+    assert r_joint >= 0.9, r_joint
     # projection of a cohort member: its own scores, reconstruction error ~ 0 with all modes
     full = PCA.from_data(shape_matrix(aligned, "all"))
     s, _, err = full.project(aligned[3].feature_vector())
