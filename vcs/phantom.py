@@ -42,7 +42,7 @@ __all__ = ["Phantom", "make_phantom", "sweep_tube", "write_stl", "KINDS", "AORTA
 KINDS = ("tube", "torus", "helix", "aorta")
 
 #: The aorta's target edge is ``AORTA_EDGE_SCALE * resolution`` mm: at resolution = 1 its quad
-#: sides are ~1.25 mm (diagonals ~1.8 mm), which keeps every aorta below 60k triangles. The analytic
+#: sides are ~1.3 mm (diagonals ~1.8 mm), which keeps every aorta below 60k triangles. The analytic
 #: kinds use ``resolution`` mm directly.
 AORTA_EDGE_SCALE = 1.3
 

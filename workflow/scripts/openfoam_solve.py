@@ -20,13 +20,18 @@ def main(smk):
 
     if detect_openfoam()[0] is None:
         raise FileNotFoundError("no OpenFOAM installation found (simpleFoam not on PATH); run `bash scripts/install.sh`")
+    # always a fresh copy of the rendered case: nothing of an interrupted or earlier run (time or
+    # processor* directories, logs, polyMesh) may leak into this one (Snakemake normally removes
+    # the output before the job starts; this also covers --touch/--notemp leftovers)
+    shutil.rmtree(smk.output.case, ignore_errors=True)
     shutil.copytree(smk.input.setup, smk.output.case, ignore=shutil.ignore_patterns(".snakemake_timestamp"))
     try:
         status = run_case(smk.output.case, ranks=smk.threads)
     except Exception as exc:  # a crash on this patient must not stop the cohort: record it
         log.error("run_case crashed\n%s", traceback.format_exc())
         status = {"converged": False, "failed": True, "case": smk.output.case,
-                  "reason": f"vcsflow.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}"}
+                  "reason": f"vcsflow.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}",
+                  "failed_log": str(smk.log[0])}
     status["patient"] = smk.wildcards.id
     with open(smk.output.status, "w") as fh:
         json.dump(status, fh, indent=2, default=float)

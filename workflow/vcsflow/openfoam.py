@@ -488,9 +488,11 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
         "rho": cfd["physics"]["rho"], "nu": cfd["physics"]["nu"],
     }
 
-    def finish(reason: str | None = None) -> dict:
+    def finish(reason: str | None = None, failed_log: str | None = None) -> dict:
         if reason:
             status["reason"] = reason
+        if failed_log:  # the log of the utility that failed (absolute path), for the user and the atlas
+            status["failed_log"] = str(case_dir / "logs" / f"log.{failed_log}")
         status["timings_s"]["total"] = round(sum(v for k, v in timings.items() if k != "total"), 3)
         (case_dir / "status.json").write_text(json.dumps(status, indent=2, default=float))
         return status
@@ -517,15 +519,15 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
     _render(case_dir, state, ["0/U", "0/p"])     # placeholder inlet until the mesh exists
 
     if run(["blockMesh"], "blockMesh").returncode != 0:
-        return finish("blockMesh failed (see logs/log.blockMesh)")
+        return finish(_utility_failure(case_dir, "blockMesh"), "blockMesh")
     if run(["snappyHexMesh", "-overwrite"], "snappyHexMesh").returncode != 0:
-        return finish("snappyHexMesh failed (see logs/log.snappyHexMesh)")
+        return finish(_utility_failure(case_dir, "snappyHexMesh"), "snappyHexMesh")
     run(["checkMesh"], "checkMesh")
     ok, cells, why = _check_mesh(case_dir / "logs" / "log.checkMesh")
     status["cells"] = cells
     if not ok:
         status["mesh_ok"] = False
-        return finish(why)
+        return finish(why, "checkMesh")
     status["mesh_ok"] = True
 
     # inlet profile on the real mesh faces, flux exact
@@ -541,7 +543,7 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
     if ranks > 1:
         _render(case_dir, state, ["system/decomposeParDict"])
         if run(["decomposePar", "-force"], "decomposePar").returncode != 0:
-            return finish("decomposePar failed (see logs/log.decomposePar)")
+            return finish(_utility_failure(case_dir, "decomposePar"), "decomposePar")
 
     stage_files = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
     logs = []
@@ -552,14 +554,14 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
         r = run(["simpleFoam"], "simpleFoam.startup", ranks)
         logs.append(case_dir / "logs" / "log.simpleFoam.startup")
         if r.returncode != 0:
-            return finish(_solver_failure(logs[-1], "start-up"))
+            return finish(_solver_failure(logs[-1], "start-up"), "simpleFoam.startup")
     _render(case_dir, state, stage_files, end_time=int(sol["max_iterations"]))
     r = run(["simpleFoam"], "simpleFoam", ranks)
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = foam_io.parse_solver_log(logs[-1])
     if r.returncode != 0:
         _collect(case_dir, status, logs, state)
-        return finish(_solver_failure(logs[-1], "main"))
+        return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
     last = main["rows"][-1] if main["rows"] else {}
     tol = float(sol["tolerance"])
     converged = bool(last) and (main["converged_message"] or
@@ -577,11 +579,12 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
             logs.append(case_dir / "logs" / "log.simpleFoam.average")
             if r.returncode != 0:
                 _collect(case_dir, status, logs, state)
-                return finish(status["reason"] + "; " + _solver_failure(logs[-1], "averaging"))
+                return finish(status["reason"] + "; " + _solver_failure(logs[-1], "averaging"), "simpleFoam.average")
             averaged = True
     if ranks > 1:
         if run(["reconstructPar", "-latestTime"], "reconstructPar").returncode != 0:
-            return finish((status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed")
+            return finish((status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed",
+                          "reconstructPar")
     if averaged:
         tdir = case_dir / _latest_time(case_dir)
         _use_means(tdir)
@@ -601,11 +604,26 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
     return finish()
 
 
+def _utility_failure(case_dir: Path, utility: str) -> str:
+    """'<utility> failed: <FOAM FATAL ERROR message> (see logs/log.<utility>)'."""
+    log = case_dir / "logs" / f"log.{utility}"
+    txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
+    m = re.search(r"FOAM FATAL (?:IO )?ERROR[^\n]*\n((?:[^\n]*\n){0,8})", txt)
+    detail = ""
+    if m:  # the message lines, without the "From ..."/"in file ..." trailer
+        lines = [ln.strip() for ln in m.group(1).splitlines() if ln.strip()]
+        lines = [ln for ln in lines if not ln.startswith(("From ", "in file ", "at line ", "FOAM exiting"))]
+        detail = ": " + " ".join(" ".join(lines).split())[:300] if lines else ""
+    elif "# vcsflow: timeout" in txt:
+        detail = ": timeout"
+    return f"{utility} failed{detail} (see logs/log.{utility})"
+
+
 def _solver_failure(log: Path, stage: str) -> str:
     txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
     m = re.search(r"(FOAM FATAL[^\n]*\n(?:[^\n]*\n){0,6})", txt)
     if "Floating point exception" in txt or "sigFpe" in txt:
-        return f"simpleFoam ({stage}) diverged: floating point exception (see {log.name})"
+        return f"simpleFoam ({stage}) diverged: floating point exception (see logs/{log.name})"
     if m:
         return f"simpleFoam ({stage}) failed: " + " ".join(m.group(1).split())[:400]
     return f"simpleFoam ({stage}) exited with an error (see logs/{log.name})"
