@@ -12,13 +12,18 @@ command -v munged >/dev/null 2>&1 || need_apt+=(munge)
 [ -e /usr/lib/x86_64-linux-gnu/libGL.so.1 ] || [ -e /usr/lib/aarch64-linux-gnu/libGL.so.1 ] || need_apt+=(libgl1)
 dpkg -s libxrender1 >/dev/null 2>&1 || need_apt+=(libxrender1)
 dpkg -s xvfb >/dev/null 2>&1 || need_apt+=(xvfb)
+# a Python >= 3.11 with venv/ensurepip (Debian splits them into python3-venv)
+PY=${PYTHON:-python3}
+command -v "$PY" >/dev/null 2>&1 || need_apt+=(python3)
+"$PY" -c "import ensurepip, venv" >/dev/null 2>&1 || need_apt+=(python3-venv)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "[install] apt-get install ${need_apt[*]}"
   apt-get update -qq
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_apt[@]}" >/dev/null
 fi
 
-PY=${PYTHON:-python3}
+"$PY" -c "import sys; sys.exit(sys.version_info < (3, 11))" || {
+  echo "[install] error: $PY is $("$PY" --version 2>&1); Python >= 3.11 is needed (set PYTHON=...)" >&2; exit 2; }
 if [ ! -x .venv/bin/python ]; then
   echo "[install] creating .venv"
   "$PY" -m venv .venv
