@@ -36,6 +36,15 @@ def _out_dir(path: str) -> Path:
     return p
 
 
+def _not_an_input(output, *inputs) -> Path:
+    """Refuse to overwrite a file the user gave as input."""
+    out = Path(output)
+    for i in inputs:
+        if i is not None and out.resolve() == Path(i).resolve():
+            raise VCSInputError(f"output '{out}' is also an input; choose another -o (inputs are never overwritten)")
+    return out
+
+
 def _write_json(path: Path, data: dict) -> None:
     path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
 
@@ -45,6 +54,8 @@ def cmd_fit(args) -> None:
     from vcs.vessel import fit_vessel
 
     out = _out_dir(args.output)
+    for name in ("model.json", "fit_report.json", "centerline.vtp", "wall_residuals.vtp"):
+        _not_an_input(out / name, args.mesh, args.inlet_cap, args.outlet_cap)
     model, report, wall_fit = fit_vessel(
         args.mesh, units=args.units, inlet=args.inlet, outlet=args.outlet,
         inlet_cap=args.inlet_cap, outlet_cap=args.outlet_cap, cap_array=args.cap_array,
@@ -68,8 +79,8 @@ def cmd_fit(args) -> None:
 
             residual_map(wall_fit, out / "residual_map.png")
     report["outputs_units"] = model.units
-    model.save(out / "model.json")
     _write_json(out / "fit_report.json", report)
+    model.save(out / "model.json")  # last and atomic: its presence means the fit is complete
     msg = f"fitted {args.mesh}: ends by {report['ends_method']}, length {report['centerline_length_mm']:.1f} mm"
     if wall_fit is not None:
         msg += (f", residual mean {report['residual_mean_mm']:.4f} mm over {report['n_points_used']}"
@@ -87,7 +98,7 @@ def cmd_coords(args) -> None:
     s = model.scale_to_mm
     pts = read_points_table(args.points) * s
     tau, theta, rho, ok = model.vcs.to_vcs(pts)
-    write_csv(args.output, {"tau": tau, "theta": theta, "rho": rho / s, "in_omega": ok.astype(int)})
+    write_csv(_not_an_input(args.output, args.points, args.model), {"tau": tau, "theta": theta, "rho": rho / s, "in_omega": ok.astype(int)})
     print(f"{len(pts)} points -> {args.output} ({int((~ok).sum())} outside Omega)")
 
 
@@ -99,7 +110,7 @@ def cmd_cartesian(args) -> None:
     s = model.scale_to_mm
     tab = read_table_columns(args.coords, ("tau", "theta", "rho"))
     x = model.vcs.to_cartesian(tab[:, 0], tab[:, 1], tab[:, 2] * s) / s
-    write_csv(args.output, {"x": x[:, 0], "y": x[:, 1], "z": x[:, 2]})
+    write_csv(_not_an_input(args.output, args.coords, args.model), {"x": x[:, 0], "y": x[:, 1], "z": x[:, 2]})
     print(f"{len(x)} points -> {args.output}")
 
 

@@ -16,7 +16,9 @@ def cmd_wall(args) -> None:
     model = VesselModel.load(args.model)
     mesh = wall_mesh(model, n_tau=args.n_tau, n_theta=args.n_theta,
                      extend_inlet=args.extend_inlet, extend_outlet=args.extend_outlet)
-    out = Path(args.output)
+    from vcs.cli import _not_an_input
+
+    out = _not_an_input(args.output, args.model)
     if out.suffix.lower() != ".stl":
         raise VCSInputError(f"output '{out}' must end in .stl")
     out.parent.mkdir(parents=True, exist_ok=True)

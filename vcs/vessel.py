@@ -100,7 +100,10 @@ class VesselModel:
     def save(self, path) -> None:
         """Write model.json (deterministic: same model, same bytes)."""
         text = json.dumps(self.to_dict(), indent=1, sort_keys=True)
-        Path(path).write_text(text + "\n")
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text + "\n")
+        tmp.replace(path)  # atomic: never a half-written model.json
 
     @classmethod
     def load(cls, path) -> "VesselModel":

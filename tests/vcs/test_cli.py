@@ -122,3 +122,12 @@ def test_wall_stl_and_grid(tube_stl, tmp_path):
             assert vol.min() > 0  # no degenerate cell at the axis
         else:
             assert (vol > 0).mean() > 0.7
+
+
+def test_inputs_are_never_overwritten(tube_stl, tmp_path):
+    run("fit", tube_stl, "-o", tmp_path / "f", "--units", "mm")
+    pts = tmp_path / "p.csv"
+    pts.write_text("x,y,z\n0,0,30\n")
+    r = run("coords", tmp_path / "f" / "model.json", pts, "-o", pts)
+    assert r.returncode == 2 and "also an input" in r.stderr
+    assert pts.read_text() == "x,y,z\n0,0,30\n"
