@@ -93,6 +93,17 @@ def main(argv=None) -> int:
     if jobs_s > 0:
         print(f"share of job time outside OpenFOAM {1 - foam_s / jobs_s:6.1%}")
     print(f"scheduler/idle share of core time  {max(0.0, 1 - jobs_s / (args.cores * wall)):6.1%}")
+    print("\nper patient (status.json timings, Snakemake benchmarks):")
+    print("| patient | cells | snappyHexMesh s | iterations | simpleFoam s | converged | resampling s | resampling / solver |")
+    print("|---|---|---|---|---|---|---|---|")
+    for pid, st in statuses.items():
+        t = st.get("timings_s", {})
+        snappy = float(t.get("snappyHexMesh") or 0.0)
+        solver = sum(float(v) for k, v in t.items() if k.startswith("simpleFoam"))
+        sample = bench.get("fields_sample", {}).get(pid)
+        ratio = f"{sample / solver:.1%}" if sample is not None and solver > 0 else "-"
+        print(f"| {pid} | {st.get('cells')} | {snappy:.1f} | {st.get('iterations')} | {solver:.1f} | "
+              f"{st.get('converged')} | {sample if sample is None else round(sample, 1)} | {ratio} |")
     return r.returncode
 
 
