@@ -1,6 +1,6 @@
 """Fault tolerance of the CFD part of the workflow with the real OpenFOAM (marker ``openfoam``;
 GitHub issue 'Reliability', item 3). One coarse synthetic aorta with the CI settings
-(config/ci.yaml), about two minutes on 2 cores for the whole file:
+(config/ci.yaml), about one minute on 2 cores for the whole file:
 
 * a hard crash (SIGKILL of Snakemake and the solver) in the middle of simpleFoam, then a rerun:
   the partial case is detected as incomplete, re-solved from a fresh copy of the rendered case,
