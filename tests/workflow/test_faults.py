@@ -265,6 +265,19 @@ def test_snappyhexmesh_failure_marks_the_patient_failed_with_the_log(wd):
     _assert_kept_out_of_the_atlas(wd, r, "snappyHexMesh failed")
 
 
+def test_case_setup_failure_is_recorded_not_a_job_failure(wd):
+    """A background cell larger than the vessel: render_case finds no point inside the lumen.
+    The openfoam_case job still succeeds; the patient's status says why, and it is excluded."""
+    wd.update_config("cfd", "mesh", "cell_size", 0.5)  # 0.5 m cells around a ~0.3 m aorta
+    r = wd.snakemake("--profile", PROFILE, "--cores", "2", check=False, timeout=900)
+    st = _status(wd)
+    assert st["converged"] is False and st["reason"].startswith("case set-up failed:"), st["reason"]
+    log = Path(st["failed_log"])
+    assert log.name == f"{PID}.log" and log.parent.name == "openfoam_case" and "case set-up failed" in log.read_text()
+    assert "openfoam_case" not in _rule_errors(r)
+    _assert_kept_out_of_the_atlas(wd, r, "case set-up failed")
+
+
 # --------------------------------------------------------------------------------- 3: divergence
 
 

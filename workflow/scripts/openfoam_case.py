@@ -1,11 +1,13 @@
 """Rule openfoam_case: render the OpenFOAM case of one patient (vcsflow.render_case)."""
 import json
 import sys
+from pathlib import Path
 
 sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
 import _common  # noqa: E402
 
 log = _common.setup(snakemake, "openfoam_case")  # noqa: F821
+SETUP_FAILED = "SETUP_FAILED.json"  # read by openfoam_solve.py
 
 
 def main(smk):
@@ -13,7 +15,15 @@ def main(smk):
 
     cfd = json.loads(json.dumps(dict(smk.params.cfd)))  # plain dicts/lists
     flavour = cfd.pop("flavour", "auto")
-    state = render_case(smk.output.case, smk.input.stl, cfd, flavour=None if flavour == "auto" else flavour)
+    try:
+        state = render_case(smk.output.case, smk.input.stl, cfd, flavour=None if flavour == "auto" else flavour)
+    except Exception as exc:  # this patient's geometry cannot be set up: a per-patient failure,
+        # recorded for openfoam_solve -> status.json -> atlas exclusion, not a cohort stop
+        reason = f"case set-up failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
+        log.error("%s: %s", smk.wildcards.id, reason)
+        Path(smk.output.case).mkdir(parents=True, exist_ok=True)
+        (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps({"reason": reason}) + "\n")
+        return
     log.info("case for %s (flavour %s): background %s cells of %g m, inside point %s, Q %.4g m3/s -> %s",
              smk.wildcards.id, state["flavour"], "x".join(map(str, state["ncells"])),
              state["cfd"]["mesh"]["cell_size"], state["inside_point"], state["flow_rate"], smk.output.case)

@@ -8,6 +8,7 @@ import json
 import shutil
 import sys
 import traceback
+from pathlib import Path
 
 sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
 import _common  # noqa: E402
@@ -25,13 +26,19 @@ def main(smk):
     # the output before the job starts; this also covers --touch/--notemp leftovers)
     shutil.rmtree(smk.output.case, ignore_errors=True)
     shutil.copytree(smk.input.setup, smk.output.case, ignore=shutil.ignore_patterns(".snakemake_timestamp"))
+    failed_setup = Path(smk.output.case) / "SETUP_FAILED.json"  # written by openfoam_case.py
     try:
-        status = run_case(smk.output.case, ranks=smk.threads)
+        if failed_setup.exists():
+            status = {"converged": False, "failed": True, "case": smk.output.case,
+                      "reason": json.loads(failed_setup.read_text())["reason"],
+                      "failed_log": str((Path(smk.log[0]).parent.parent / "openfoam_case" / f"{smk.wildcards.id}.log").resolve())}
+        else:
+            status = run_case(smk.output.case, ranks=smk.threads)
     except Exception as exc:  # a crash on this patient must not stop the cohort: record it
         log.error("run_case crashed\n%s", traceback.format_exc())
         status = {"converged": False, "failed": True, "case": smk.output.case,
                   "reason": f"vcsflow.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}",
-                  "failed_log": str(smk.log[0])}
+                  "failed_log": str(Path(smk.log[0]).resolve())}
     status["patient"] = smk.wildcards.id
     with open(smk.output.status, "w") as fh:
         json.dump(status, fh, indent=2, default=float)
