@@ -10,7 +10,7 @@ from scipy.interpolate import BSpline
 
 from vcs import coords as _coords
 from vcs.centerline import VoxelLumen, arc_length_table, astar_path, fit_centerline, voxelize
-from vcs.ends import End, Ends, find_ends
+from vcs.ends import End, Ends
 from vcs.errors import VCSInputError
 from vcs.frame import ParallelTransportFrame, initial_v1
 

@@ -9,7 +9,7 @@ import json
 import shutil
 
 import pytest
-import yaml
+from conftest import ci_workdir
 
 
 HAVE_FOAM = shutil.which("simpleFoam") is not None
@@ -17,29 +17,10 @@ SEEDS = (0, 1, 2, 3)
 IDS = [f"demo_aorta_{s}" for s in SEEDS]
 
 
-def _ci_workdir(path, make_workdir, repo):
-    wd = make_workdir(path, [{"id": f"demo_aorta_{s}", "mesh": f"resources/demo/aorta_seed{s}.stl", "units": "mm"}
-                             for s in SEEDS])
-    cfg = wd.config()
-    ci = yaml.safe_load((repo / "config" / "ci.yaml").read_text())
-    ci.pop("patients")
-    for key, value in ci.items():
-        if isinstance(value, dict) and isinstance(cfg.get(key), dict):
-            for k, v in value.items():
-                if isinstance(v, dict) and isinstance(cfg[key].get(k), dict):
-                    cfg[key][k].update(v)
-                else:
-                    cfg[key][k] = v
-        else:
-            cfg[key] = value
-    wd.write_config(cfg)
-    return wd
-
-
 @pytest.mark.openfoam
 @pytest.mark.skipif(not HAVE_FOAM, reason="OpenFOAM (simpleFoam) not installed; run scripts/install.sh")
 def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path, workdir_factory, repo):
-    wd = _ci_workdir(tmp_path, workdir_factory, repo)
+    wd = ci_workdir(tmp_path, SEEDS)
     profile = str(repo / "profiles" / "local")
     wd.snakemake("--profile", profile, "--cores", "2", timeout=3600)
     res = wd.path / "results"

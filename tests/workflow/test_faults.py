@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import with_ci_config
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
@@ -45,18 +46,7 @@ def _ci_config() -> dict:
     """config/config.yaml overlaid with config/ci.yaml (as test_demo does); patients.tsv."""
     cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     cfg["patients"] = "patients.tsv"
-    ci = yaml.safe_load((REPO / "config" / "ci.yaml").read_text())
-    ci.pop("patients")
-    for key, value in ci.items():
-        if isinstance(value, dict) and isinstance(cfg.get(key), dict):
-            for k, v in value.items():
-                if isinstance(v, dict) and isinstance(cfg[key].get(k), dict):
-                    cfg[key][k].update(v)
-                else:
-                    cfg[key][k] = v
-        else:
-            cfg[key] = value
-    return cfg
+    return with_ci_config(cfg)
 
 
 ROWS = [{"id": PID, "mesh": "resources/demo/aorta_seed0.stl", "units": "mm"}]
