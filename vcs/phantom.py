@@ -331,9 +331,14 @@ def _tube(h: float, **overrides) -> Phantom:
         n = np.shape(_s_array(s))
         return tuple(np.broadcast_to(e, n + (3,)).copy() for e in (ez, ex, ey))
 
+    return _circular(centerline, frame, L, r0, h, p)
+
+
+def _circular(centerline, frame, L: float, r0: float, h: float, p: dict):
+    """Mesh of a constant-radius tube of length L around ``centerline`` in ``frame`` (edges ~h)."""
     n_phi = _n_around(r0, h)
     ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
-    t, v1, v2 = frame(ring)
+    _, v1, v2 = frame(ring)
     V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
     p.update(length_mm=L, n_phi=n_phi, n_s=len(ring))
     return V, F, p, centerline, _const_radius(r0), frame, ring
@@ -355,13 +360,7 @@ def _torus(h: float, **overrides) -> Phantom:
         # t, v1 = principal normal (towards the torus axis), v2 = t x v1 = +z
         return np.stack([-sn, c, z], -1), np.stack([-c, -sn, z], -1), np.stack([z, z, 1 + z], -1)
 
-    L = R * A
-    n_phi = _n_around(r0, h)
-    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
-    _, v1, v2 = frame(ring)
-    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
-    p.update(length_mm=L, n_phi=n_phi, n_s=len(ring))
-    return V, F, p, centerline, _const_radius(r0), frame, ring
+    return _circular(centerline, frame, R * A, r0, h, p)
 
 
 def _helix(h: float, **overrides) -> Phantom:
