@@ -69,6 +69,8 @@ def write_shape_files(pca: PCA, template, out_dir, *, n_modes: int | None = None
     files = {"shape_mean": "shape_mean.vtp"}
     mean = VesselModel.from_feature_vector(pca.mean, template)
     shape_polydata(mean).save(str(out / files["shape_mean"]))
+    mean_shape_png(mean, out / "shape_mean.png")
+    files["shape_mean_png"] = "shape_mean.png"
     for k in range(min(n_modes or pca.n_modes, pca.n_modes)):
         for sign, tag in ((1.0, "plus"), (-1.0, "minus")):
             d = mode_deformation(pca, template, k, n_sigma=sign * n_sigma)
@@ -85,6 +87,32 @@ def write_shape_files(pca: PCA, template, out_dir, *, n_modes: int | None = None
                                                     f"{100 * pca.explained_variance_ratio[k]:.1f}% variance)")
                 files[f"shape_mode{k + 1}_deformation"] = png
     return files
+
+
+def mean_shape_png(mean, path, *, root_taus=(0.0, 0.04, 0.07, 0.1, 0.2)) -> None:
+    """The mean shape's wall radius rho_w(tau, theta) as a map, and its cross-sections near the
+    root as polar curves (the sinuses of Valsalva show as three lobes)."""
+    plt = _plt()
+    th = np.linspace(0.0, TWO_PI, 181)
+    tau = np.linspace(0.0, 1.0, 201)
+    R = mean.wall(tau[:, None], th[None, :])
+    fig = plt.figure(figsize=(10, 3.8), dpi=110)
+    ax = fig.add_subplot(1, 2, 1)
+    im = ax.imshow(R.T, origin="lower", aspect="auto", extent=(0, 1, 0, TWO_PI), cmap="viridis")
+    ax.set_xlabel("tau")
+    ax.set_ylabel("theta (rad)")
+    ax.set_title("mean shape: wall radius rho_w (mm)")
+    fig.colorbar(im, ax=ax)
+    axp = fig.add_subplot(1, 2, 2, projection="polar")
+    radii = [mean.wall(np.full_like(th, t), th) for t in root_taus]
+    for t, r in zip(root_taus, radii):
+        axp.plot(th, r, label=f"tau = {t:g}")
+    axp.set_rmin(0.8 * min(r.min() for r in radii))  # an offset radial axis shows the lobes
+    axp.set_title("cross-sections near the root (mm)", fontsize=9)
+    axp.legend(fontsize=7, loc="lower left", bbox_to_anchor=(1.0, 0.0))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def deformation_png(d: dict, path, *, title: str = "") -> None:
