@@ -55,14 +55,14 @@ def main(argv=None) -> int:
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_cohort_")).resolve()
     work.mkdir(parents=True, exist_ok=True)
     sheet = work / "patients.tsv"
-    rows = ["id\tmesh\tunits"] + [f"aorta_{s}\tresources/demo/aorta_seed{s}.stl\tmm" for s in range(args.n)]
+    rows = ["id\tmesh\tunits"] + [f"aorta_{s}\tresults/demo/aorta_seed{s}.stl\tmm" for s in range(args.n)]
     sheet.write_text("\n".join(rows) + "\n")
     override = work / "bench.yaml"
     override.write_text(yaml.safe_dump({"patients": str(sheet)}))
     base = ["-s", str(REPO / "Snakefile"), "-d", str(work), "--profile", str(REPO / "profiles" / "local"),
             "--cores", str(args.cores), "--configfile", str(REPO / "config" / "config.yaml"),
             str(Path(args.configfile).resolve()), str(override)]
-    phantoms = [f"resources/demo/aorta_seed{s}.stl" for s in range(args.n)]
+    phantoms = [f"results/demo/aorta_seed{s}.stl" for s in range(args.n)]
     # targets before the options: `--quiet` takes optional values
     subprocess.run([str(SNAKEMAKE), *phantoms, *base, "--quiet"], check=True, cwd=work)
 

@@ -21,9 +21,12 @@ IDS = [f"demo_aorta_{s}" for s in SEEDS]
 @pytest.mark.skipif(not HAVE_FOAM, reason="OpenFOAM (simpleFoam) not installed; run scripts/install.sh")
 def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path, workdir_factory, repo):
     wd = ci_workdir(tmp_path, SEEDS)
+    before = {p.name for p in wd.path.iterdir()}
     profile = str(repo / "profiles" / "local")
     wd.snakemake("--profile", profile, "--cores", "2", timeout=3600)
     res = wd.path / "results"
+    # the workflow writes nothing outside results/ (and Snakemake's own .snakemake/)
+    assert {p.name for p in wd.path.iterdir()} - before == {"results", ".snakemake"}
 
     for pid in IDS:
         st = json.loads((res / "patients" / pid / "status.json").read_text())

@@ -112,7 +112,7 @@ def test_mesh_path_with_spaces_is_quoted(cohort):
 
 
 def test_demo_rows_generate_their_phantoms(tmp_path, workdir_factory):
-    wd = workdir_factory(tmp_path, [{"id": f"demo_{s}", "mesh": f"resources/demo/aorta_seed{s}.stl", "units": "mm"}
+    wd = workdir_factory(tmp_path, [{"id": f"demo_{s}", "mesh": f"results/demo/aorta_seed{s}.stl", "units": "mm"}
                                  for s in (0, 1, 2)])
     planned = wd.planned_jobs()
     assert {("vcs_phantom", f"aorta_seed{s}") for s in (0, 1, 2)} <= planned

@@ -49,7 +49,7 @@ def _ci_config() -> dict:
     return with_ci_config(cfg)
 
 
-ROWS = [{"id": PID, "mesh": "resources/demo/aorta_seed0.stl", "units": "mm"}]
+ROWS = [{"id": PID, "mesh": "results/demo/aorta_seed0.stl", "units": "mm"}]
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 ID_PATTERN = r"[A-Za-z0-9_-]+"
-DEMO_MESH = re.compile(r"resources/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<seed>[0-9]+)\.stl")
+DEMO_MESH = re.compile(r"results/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<seed>[0-9]+)\.stl")
 SHEET_COLUMNS = ("id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap")
 
 # The `vcs` console script lives beside this Python (the project's venv): put it on PATH so that

@@ -5,10 +5,10 @@ rule vcs_phantom:
     conda:
         "../envs/vcs.yaml"
     # Synthetic vessel surface (mm, open ends) for the demo cohort; only for sheet rows whose
-    # mesh is resources/demo/<kind>_seed<N>.stl.
+    # mesh is results/demo/<kind>_seed<N>.stl.
     output:
-        stl="resources/demo/{kind}_seed{seed}.stl",
-        params="resources/demo/{kind}_seed{seed}.json",
+        stl="results/demo/{kind}_seed{seed}.stl",
+        params="results/demo/{kind}_seed{seed}.json",
     params:
         resolution=config["demo"]["resolution"],
     log:
