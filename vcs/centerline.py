@@ -39,12 +39,13 @@ class VoxelLumen:
         return np.rint((np.asarray(points, float) - self.origin) / self.h).astype(np.int64)
 
 
-def voxelize(vertices: np.ndarray, faces: np.ndarray, h: float, pad: int = 2) -> VoxelLumen:
+def voxelize(vertices: np.ndarray, faces: np.ndarray, h: float, pad: int = 2, *, distance: bool = True) -> VoxelLumen:
     """Inside/outside voxel mask of a closed triangulated surface by scan-line parity along x.
 
     Each triangle is intersected with the x-parallel rays through the voxel centres of its (y, z)
     footprint; a voxel is inside when an odd number of crossings lies before its centre. Vectorised
-    over triangles and rays; the result does not depend on face orientation.
+    over triangles and rays; the result does not depend on face orientation. ``distance``: also the
+    Euclidean distance of inside voxels to the nearest outside voxel (mm).
     """
     lo = vertices.min(axis=0) - (pad + 0.5) * h
     hi = vertices.max(axis=0) + (pad + 0.5) * h
@@ -81,8 +82,8 @@ def voxelize(vertices: np.ndarray, faces: np.ndarray, h: float, pad: int = 2) ->
     crossings = np.zeros((shape[0] + 1, shape[1], shape[2]), np.int32)
     np.add.at(crossings, (ii, jj[hit], kk[hit]), 1)
     inside = (np.cumsum(crossings[:-1], axis=0) % 2).astype(bool)
-    distance = ndimage.distance_transform_edt(inside, sampling=h)
-    return VoxelLumen(inside, distance, origin, float(h))
+    dist = ndimage.distance_transform_edt(inside, sampling=h) if distance else np.zeros(inside.shape)
+    return VoxelLumen(inside, dist, origin, float(h))
 
 
 _OFFSETS = np.array(

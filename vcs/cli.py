@@ -28,6 +28,16 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{v} must be >= 0")
+    return v
+
+
 def _out_dir(path: str) -> Path:
     p = Path(path)
     if p.exists() and not p.is_dir():
@@ -144,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--L", type=_positive_int, default=9, help="centerline interior knots (paper: 9)")
     f.add_argument("--K", type=_positive_int, default=19, help="wall knots in tau (paper: 19)")
     f.add_argument("--R", type=_positive_int, default=15, help="wall knots in theta (paper: 15)")
-    f.add_argument("--recentre", type=int, default=3,
+    f.add_argument("--recentre", type=_non_negative_int, default=3,
                    help="centerline re-centring iterations on the wall (0 = paper's A*+spline only)")
     f.add_argument("--residual-png", action="store_true", help="also write residual_map.png")
     f.set_defaults(func=cmd_fit)

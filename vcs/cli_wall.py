@@ -9,6 +9,12 @@ from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM
 
 
+def _positive_int(text: str) -> int:
+    from vcs.cli import _positive_int as check
+
+    return check(text)
+
+
 def cmd_wall(args) -> None:
     from vcs.surface import wall_mesh, write_multisolid_stl
     from vcs.vessel import VesselModel
@@ -67,8 +73,8 @@ def add_commands(sub) -> None:
     w = sub.add_parser("wall", help="write the model wall (Eq. 8) as a closed multi-solid STL")
     w.add_argument("model", help="model.json from `vcs fit`")
     w.add_argument("-o", "--output", required=True, help="output .stl")
-    w.add_argument("--n-tau", type=int, default=None, help="axial intervals (default: square quads)")
-    w.add_argument("--n-theta", type=int, default=64, help="vertices around the circumference")
+    w.add_argument("--n-tau", type=_positive_int, default=None, help="axial intervals (default: square quads)")
+    w.add_argument("--n-theta", type=_positive_int, default=64, help="vertices around the circumference")
     w.add_argument("--extend-inlet", type=float, default=0.0, help="straight inlet extension, in diameters")
     w.add_argument("--extend-outlet", type=float, default=0.0, help="straight outlet extension, in diameters")
     w.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the STL (OpenFOAM: m)")
@@ -77,9 +83,9 @@ def add_commands(sub) -> None:
     g = sub.add_parser("grid", help="write the (tau, theta, rho_n) measurement grid as VTU")
     g.add_argument("model", help="model.json from `vcs fit`")
     g.add_argument("-o", "--output", required=True, help="output .vtu")
-    g.add_argument("--n-tau", type=int, default=64)
-    g.add_argument("--n-theta", type=int, default=32)
-    g.add_argument("--n-rho", type=int, default=8)
+    g.add_argument("--n-tau", type=_positive_int, default=64)
+    g.add_argument("--n-theta", type=_positive_int, default=32)
+    g.add_argument("--n-rho", type=_positive_int, default=8)
     g.add_argument("--scheme", default="cylindrical", choices=["cylindrical", "ogrid"])
     g.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the VTU points")
     g.set_defaults(func=cmd_grid)

@@ -82,12 +82,11 @@ def _reach(pts: np.ndarray, max_n: int = 1024) -> np.ndarray:
     sub = pts[::step]
     D = np.linalg.norm(sub[:, None, :] - sub[None, :, :], axis=-1)
     n = len(sub)
-    Dt = D  # rows i, columns j
-    left = np.concatenate([np.full((n, 1), np.inf), Dt[:, :-1]], axis=1)
-    right = np.concatenate([Dt[:, 1:], np.full((n, 1), np.inf)], axis=1)
-    is_min = (Dt <= left) & (Dt <= right)
+    left = np.concatenate([np.full((n, 1), np.inf), D[:, :-1]], axis=1)  # D[i, j-1]
+    right = np.concatenate([D[:, 1:], np.full((n, 1), np.inf)], axis=1)  # D[i, j+1]
+    is_min = (D <= left) & (D <= right)
     np.fill_diagonal(is_min, False)
-    vals = np.minimum(np.where(is_min, Dt, np.inf).min(axis=1) * 0.5, 1e30)  # 1e30: no other part
+    vals = np.minimum(np.where(is_min, D, np.inf).min(axis=1) * 0.5, 1e30)  # 1e30: no other part
     return np.interp(np.arange(len(pts)), np.arange(0, len(pts), step)[: len(vals)], vals)
 
 

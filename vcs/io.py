@@ -88,7 +88,7 @@ def _read_polydata(path: Path):
     return mesh
 
 
-def read_surface(path, units: str = "auto") -> Surface:
+def read_surface(path, units: str = "auto", *, check_extent: bool = True) -> Surface:
     """Read a triangulated vessel wall (STL, VTP, VTK, PLY, OBJ) and convert it to mm.
 
     Parameters
@@ -97,6 +97,9 @@ def read_surface(path, units: str = "auto") -> Surface:
         Surface file.
     units : {"auto", "mm", "cm", "m"}
         Units of the file; ``auto`` uses :func:`guess_units`.
+    check_extent : bool
+        Refuse explicit units that make the surface smaller than 5 mm or larger than 3 m (a whole
+        vessel); off for cap surfaces.
     """
     path = Path(path)
     if path.suffix.lower() not in SURFACE_EXTENSIONS:
@@ -149,7 +152,7 @@ def read_surface(path, units: str = "auto") -> Surface:
     else:
         source = "given"
         extent_mm = extent * UNIT_TO_MM[units]
-        if not 5.0 <= extent_mm <= 3000.0:
+        if check_extent and not 5.0 <= extent_mm <= 3000.0:
             better = guess_units(extent)[0]
             raise VCSInputError(
                 f"with --units {units} the mesh spans {extent_mm:.3g} mm, not a blood vessel; "
@@ -264,15 +267,25 @@ def read_table_columns(path, names: tuple[str, ...]) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise VCSInputError(f"file '{path}' does not exist; check the path")
-    if path.suffix.lower() == ".npy":
-        arr = np.load(path, allow_pickle=False)
-    else:
-        with open(path) as fh:
-            header = [h.strip().lower() for h in fh.readline().strip().split(",")]
-        missing = [n for n in names if n not in header]
-        if missing:
-            raise VCSInputError(f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}")
-        arr = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, [header.index(n) for n in names]]
+    try:
+        if path.suffix.lower() == ".npy":
+            arr = np.load(path, allow_pickle=False)
+        else:
+            with open(path) as fh:
+                header = [h.strip().lower() for h in fh.readline().strip().split(",")]
+            missing = [n for n in names if n not in header]
+            if missing:
+                raise VCSInputError(f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}")
+            arr = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+            if arr.size == 0:
+                raise VCSInputError(f"'{path}' has a header but no rows; give at least one row")
+            arr = arr[:, [header.index(n) for n in names]]
+        arr = np.asarray(arr, dtype=float)
+    except VCSInputError:
+        raise
+    except Exception as exc:
+        raise VCSInputError(f"cannot read '{path}' ({type(exc).__name__}: {exc}); give numeric "
+                            f"{','.join(names)} columns") from None
     arr = np.asarray(arr, dtype=float)
     if arr.ndim != 2 or arr.shape[1] != len(names):
         raise VCSInputError(f"'{path}' has shape {arr.shape}; expected {len(names)} columns")

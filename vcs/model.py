@@ -74,21 +74,23 @@ class VesselCoordinateSystem:
         n_vox = np.prod(extent / h)
         if n_vox > max_voxels:
             h *= (n_vox / max_voxels) ** (1 / 3)
-        lumen = voxelize(cv, cf, h)
+        lumen = voxelize(cv, cf, h, distance=False)  # the distance is to the wall only, below
         if not lumen.inside.any():
             raise VCSInputError("the surface encloses no voxel of the lumen; check the units (--units) and that it is a tube")
         lumen = _wall_distance(lumen, vertices, faces[ends.wall_mask])
         t_vox = time.perf_counter()
 
         inlet, outlet = ends.inlet, ends.outlet
-        if inlet.normal is None or outlet.normal is None:
-            inlet = _centre_point_end(vertices, faces, lumen, inlet, outlet.center, "inlet")
-            outlet = _centre_point_end(vertices, faces, lumen, outlet, inlet.center, "outlet")
         start = _start_voxel(lumen, inlet, "inlet")
         goal = _start_voxel(lumen, outlet, "outlet")
-        path = astar_path(lumen, start, goal)
+        path = lumen.centers(astar_path(lumen, start, goal))
+        if inlet.normal is None:  # explicit points: end planes from the path and the wall
+            inlet, path = _point_end_plane(vertices, faces, lumen, inlet, path)
+        if outlet.normal is None:
+            outlet, rev = _point_end_plane(vertices, faces, lumen, outlet, path[::-1])
+            path = rev[::-1]
         t_path = time.perf_counter()
-        pts = np.vstack([inlet.center, lumen.centers(path), outlet.center])
+        pts = np.vstack([inlet.center, path, outlet.center])
         dirs = None
         if inlet.normal is not None and outlet.normal is not None:  # end planes known: meet them square
             dirs = (inlet.normal, -outlet.normal)
@@ -280,30 +282,35 @@ def _start_voxel(lumen: VoxelLumen, end: End, name: str) -> np.ndarray:
     if d[i] > 3 * lumen.h + 1.0:
         c = end.center
         raise VCSInputError(
-            f"the {name} point ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) mm is {d[i]:.1f} mm outside the lumen; "
-            f"give a point inside the vessel in or near the {name} end plane (mesh units, see --units)"
+            f"the {name} point ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) mm (converted from the mesh units) is "
+            f"{d[i]:.1f} mm outside the lumen; give a point inside the vessel in or near the {name} end plane"
         )
     return inside[i]
 
 
-def _centre_point_end(vertices, faces, lumen: VoxelLumen, end: End, other: np.ndarray, name: str) -> End:
-    """Turn an explicit end point into an end plane: normal from a short voxel path toward the
-    other end, centre = centroid of the wall's cross-section in that plane near the point."""
-    if end.normal is not None:
-        return end
-    start = _start_voxel(lumen, end, name)
-    r_loc = float(lumen.distance[tuple(start)])
-    # direction: steepest way into the lumen, along the short path toward the other end
-    goal = _start_voxel(lumen, End(other, None, None, "point"), "other end")
-    path = lumen.centers(astar_path(lumen, start, goal))
-    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
-    ahead = path[np.searchsorted(s, min(s[-1], max(2.0 * r_loc, 4 * lumen.h)))]
-    normal = ahead - path[0]
-    normal /= np.linalg.norm(normal)
-    center, radius = _plane_section(vertices, faces, end.center, normal, 4.0 * max(r_loc, lumen.h))
+def _point_end_plane(vertices, faces, lumen: VoxelLumen, end: End, path: np.ndarray):
+    """End plane of an explicit end point, from the lumen path that starts there.
+
+    The normal is the path's direction between one and three local radii from its start (past
+    the first voxels, which head from an off-centre point to the middle); the centre is the
+    centroid of the wall's cut by the plane through the point. Path points within one local
+    radius of the start are dropped so the curve starts at the centre without a kink.
+    Returns (end, path).
+    """
+    ijk = np.rint((path - lumen.origin) / lumen.h).astype(int)
+    d = lumen.distance[tuple(ijk.T)]
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    r_loc = float(np.median(d[s <= max(s[-1] / 4, 2 * lumen.h)]))
+    a = path[np.searchsorted(s, min(r_loc, s[-1] / 3))]
+    b = path[np.searchsorted(s, min(3 * r_loc, 2 * s[-1] / 3))]
+    normal = (b - a) / max(np.linalg.norm(b - a), 1e-300)
+    center, radius = _plane_section(vertices, faces, end.center, normal, 3.0 * max(r_loc, lumen.h))
+    keep = s > r_loc
+    path = path[keep] if keep.sum() >= 4 else path
     if center is None:
-        return End(lumen.centers(start), normal, None, "point (no wall cross-section found)")
-    return End(center, normal, radius, "point, centred on the wall cross-section")
+        log.warning("no wall cross-section found at the %s point; the path start is used", end.source)
+        return End(path[0], normal, None, "point (no wall cross-section found: path start used)"), path
+    return End(center, normal, radius, "point, centred on the wall cross-section"), path
 
 
 def _plane_section(vertices, faces, p, n, r_max):
@@ -312,11 +319,10 @@ def _plane_section(vertices, faces, p, n, r_max):
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     a, b = sd[e[:, 0]], sd[e[:, 1]]
     cross = (a * b) < 0
-    if not cross.any():
-        return None, None
     ea, eb = e[cross, 0], e[cross, 1]
     w = (a[cross] / (a[cross] - b[cross]))[:, None]
-    x = vertices[ea] + w * (vertices[eb] - vertices[ea])
+    on = np.abs(sd) <= 1e-9 * max(float(np.ptp(vertices)), 1.0)  # vertices lying in the plane
+    x = np.vstack([vertices[ea] + w * (vertices[eb] - vertices[ea]), vertices[np.unique(faces)[on[np.unique(faces)]]]])
     x = x[np.linalg.norm(x - p, axis=1) < r_max]
     if len(x) < 3:
         return None, None

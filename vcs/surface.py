@@ -93,6 +93,8 @@ def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
         raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
     if n_theta < 8:
         raise VCSInputError(f"--n-theta {n_theta} is too small; use at least 8")
+    if n_tau is not None and n_tau < 1:
+        raise VCSInputError(f"--n-tau {n_tau} must be at least 1")
     vcs = model.vcs
     theta = np.linspace(0, TWO_PI, n_theta, endpoint=False)
     r_mean = float(model.wall(np.linspace(0, 1, 50)[:, None], theta[None, :]).mean())
@@ -102,7 +104,7 @@ def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
     if n_tau is None:
         n_tau = max(4, int(round(vcs.length / step)))
     tau = np.linspace(0, 1, n_tau + 1)
-    rows = [model.surface_points(tau[:, None], theta[None, :])]
+    main = model.surface_points(tau[:, None], theta[None, :])
     ends = []
     for tau_e, ext, sign in ((0.0, extend_inlet, -1.0), (1.0, extend_outlet, 1.0)):
         t, v1, v2 = vcs.frame(np.array([tau_e]))
@@ -115,7 +117,7 @@ def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
     (sec0, d0, s0), (sec1, d1, s1) = ends
     ext_in = sec0[None] + s0[::-1, None, None] * d0[None, None]  # farthest first
     ext_out = sec1[None] + s1[:, None, None] * d1[None, None]
-    grid = np.concatenate([ext_in, rows[0], ext_out], axis=0)
+    grid = np.concatenate([ext_in, main, ext_out], axis=0)
     n_rows = len(grid)
     verts = grid.reshape(-1, 3)
     faces = _grid_faces(n_rows, n_theta)
@@ -183,7 +185,7 @@ class MeasurementGrid:
 
 
 def _section_pattern(n_theta: int, n_rho: int, scheme: str):
-    """2-D cross-section pattern: (P, 2) points in the unit disk and (Q, 4) quads.
+    """2-D cross-section pattern: (P, 2) points in the unit disk, (Q, 4) quads and (P,) theta.
 
     ``cylindrical``: polar rings rho_n = k / n_rho (k = 0 collapses to the axis: degenerate quads
     there, as in the paper's grid). ``ogrid``: a Cartesian core square (half-width 0.5 / sqrt 2,
@@ -196,7 +198,7 @@ def _section_pattern(n_theta: int, n_rho: int, scheme: str):
         idx = np.arange((n_rho + 1) * n_theta).reshape(n_rho + 1, n_theta)
         a, b = idx[:-1], idx[1:]
         Q = np.stack([a, b, np.roll(b, -1, 1), np.roll(a, -1, 1)], -1).reshape(-1, 4)  # CCW about t
-        return P, Q
+        return P, Q, np.tile(th, n_rho + 1)  # theta of the axis points: their pattern angle
     if scheme != "ogrid":
         raise VCSInputError(f"unknown grid scheme '{scheme}'; use cylindrical or ogrid")
     if n_theta % 4:
@@ -225,7 +227,8 @@ def _section_pattern(n_theta: int, n_rho: int, scheme: str):
         P.append(ring)
         Q.append(np.stack([prev, ids, np.roll(ids, -1), np.roll(prev, -1)], -1))  # CCW about t
         prev, start = ids, start + len(ring)
-    return np.concatenate(P), np.concatenate(Q)
+    P, Q = np.concatenate(P), np.concatenate(Q)
+    return P, Q, np.mod(np.arctan2(P[:, 1], P[:, 0]), TWO_PI)
 
 
 def measurement_grid(model, *, n_tau: int = 64, n_theta: int = 32, n_rho: int = 8,
@@ -236,9 +239,8 @@ def measurement_grid(model, *, n_tau: int = 64, n_theta: int = 32, n_rho: int = 
         raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
     if min(n_tau, n_theta, n_rho) < 1 or n_theta < 4:
         raise VCSInputError("grid sizes must be positive (n_theta >= 4)")
-    P, Q = _section_pattern(n_theta, n_rho, scheme)
+    P, Q, theta = _section_pattern(n_theta, n_rho, scheme)
     rho_n = np.linalg.norm(P, axis=1)
-    theta = np.mod(np.arctan2(P[:, 1], P[:, 0]), TWO_PI)
     tau = np.linspace(0, 1, n_tau + 1)
     T = np.repeat(tau, len(P))
     TH = np.tile(theta, len(tau))

@@ -116,7 +116,15 @@ class VesselModel:
             raise VCSInputError(f"'{path}' is not a model.json written by `vcs fit`") from None
         if not isinstance(d, dict) or "centerline" not in d:
             raise VCSInputError(f"'{path}' is not a model.json written by `vcs fit`")
-        return cls.from_dict(d)
+        try:
+            if d.get("units", {}).get("input") not in UNIT_TO_MM:
+                raise ValueError("unknown input units")
+            return cls.from_dict(d)
+        except VCSInputError:
+            raise
+        except (KeyError, ValueError, TypeError, IndexError, AssertionError) as exc:
+            raise VCSInputError(f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); "
+                                "refit it with `vcs fit`") from None
 
 
 def largest_component(surf: Surface) -> Surface:
@@ -139,8 +147,12 @@ def largest_component(surf: Surface) -> Surface:
     keep = face_lab == keep_lab
     msg = (f"{len(used)} disconnected surface components; kept the largest ({keep.sum()} triangles, "
            f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles")
-    return Surface(surf.vertices, f[keep], {k: v[keep] for k, v in surf.cell_data.items()}, surf.units,
-                   surf.units_source, surf.path, (*surf.warnings, msg))
+    # drop the other components' vertices too: they must not size the voxel grid
+    kept_v = np.unique(f[keep])
+    remap = np.full(n, -1)
+    remap[kept_v] = np.arange(len(kept_v))
+    return Surface(surf.vertices[kept_v], remap[f[keep]], {k: v[keep] for k, v in surf.cell_data.items()},
+                   surf.units, surf.units_source, surf.path, (*surf.warnings, msg))
 
 
 def parse_point(text: str | None, name: str) -> np.ndarray | None:
@@ -191,7 +203,7 @@ def fit_vessel(
         if cap is None:
             caps.append(None)
         else:
-            c = read_surface(cap, surf.units)
+            c = read_surface(cap, surf.units, check_extent=False)  # a cap is only as wide as the vessel
             caps.append((c.vertices, c.faces))
     ends = find_ends(
         surf.vertices, surf.faces, surf.cell_data,

@@ -147,7 +147,8 @@ REASONS = {0: "used", 1: "beyond_end_planes", 2: "outside_omega", 3: "not_first_
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals, oriented outward (positive enclosed volume)."""
+    """Area-weighted vertex normals (orientation as given by the winding; `fit_wall` orients them
+    outward by a majority vote)."""
     tri = vertices[faces]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n = np.zeros_like(vertices)
@@ -175,7 +176,6 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
     to take the flare of the ostium too).
     """
     used_v = np.unique(faces)
-    pts_all = vertices
     tau = np.full(len(vertices), np.nan)
     theta = np.full(len(vertices), np.nan)
     rho = np.full(len(vertices), np.nan)
@@ -189,9 +189,15 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
     t_end, _, _ = vcs.frame(t_)
     along = np.abs(np.einsum("ij,ij->i", vertices[used_v] - vcs.curve(t_), t_end))
     on_ring = at_end & (along <= 0.02 * r_) & (r_ * np.interp(t_, vcs.index.tau, vcs.index.curvature) < 1)
-    om = om | on_ring
-    reason[used_v[~om & at_end]] = 1
-    reason[used_v[~om & ~at_end]] = 2
+    # ...but not the inside of a flat cap lying in the end plane (closed surfaces): only vertices
+    # at about the radius of the wall just inside the section
+    for end, near in ((0.0, (t_ > 0) & (t_ < 0.02)), (1.0, (t_ < 1) & (t_ > 0.98))):
+        ring = on_ring & (t_ == end)
+        if ring.any() and near.any():
+            on_ring[ring] &= r_[ring] >= 0.85 * np.median(r_[near])
+    valid = np.where(at_end, on_ring, om)  # at tau = 0 or 1: only the end rings count as wall
+    reason[used_v[~valid & at_end]] = 1
+    reason[used_v[~valid & ~at_end]] = 2
 
     tri = vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
@@ -274,4 +280,4 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
         "wall_smoothing": smoothing,
     }
     keep = ev
-    return WallFit(model, pts_all[keep], tau[keep], theta[keep], rho[keep], residual[keep], sel[keep], reason[keep], report)
+    return WallFit(model, vertices[keep], tau[keep], theta[keep], rho[keep], residual[keep], sel[keep], reason[keep], report)

@@ -28,7 +28,7 @@ def run(main, snakemake, log: logging.Logger) -> None:
 
     try:
         main(snakemake)
-    except (VCSInputError, ValueError, FileNotFoundError) as exc:
+    except (VCSInputError, FileNotFoundError) as exc:  # a plain ValueError is a bug: traceback below
         log.error("%s", " ".join(str(exc).split()))
         sys.exit(2)
     except Exception:  # a bug: keep the traceback

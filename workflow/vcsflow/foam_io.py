@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
+
 # --------------------------------------------------------------------------- STL
 
 
@@ -37,7 +39,7 @@ def read_stl_solids(path: str | Path) -> dict[str, np.ndarray]:
             elif key == "endsolid":
                 name = None
     if not solids:
-        raise ValueError(f"{path}: no ASCII STL solids found (binary STL is not supported)")
+        raise VCSInputError(f"{path}: no ASCII STL solids found (binary STL is not supported)")
     return {k: np.asarray(v, dtype=float).reshape(-1, 3, 3) for k, v in solids.items()}
 
 
@@ -81,7 +83,7 @@ def _strip(text: str) -> str:
 def _read_text(path: Path) -> str:
     data = Path(path).read_bytes()
     if b"format      binary" in data[:2000] or re.search(rb"format\s+binary", data[:2000]):
-        raise ValueError(f"{path}: binary OpenFOAM file; the case must be written with writeFormat ascii")
+        raise VCSInputError(f"{path}: binary OpenFOAM file; the case must be written with writeFormat ascii")
     return _strip(data.decode("ascii", errors="replace"))
 
 
@@ -101,7 +103,7 @@ def read_boundary(polymesh: Path) -> dict[str, dict]:
 def _list_body(txt: str) -> tuple[int, str]:
     m = re.search(r"(\d+)\s*\(", txt)
     if m is None:
-        raise ValueError("no OpenFOAM list found")
+        raise VCSInputError("no OpenFOAM list found")
     return int(m.group(1)), txt[m.end():]
 
 

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
+
 from . import foam_io
 
 TEMPLATE_DIR = Path(__file__).resolve().parents[2] / "templates" / "openfoam"
@@ -220,7 +222,7 @@ def _inside_point(solids: dict[str, np.ndarray], bmin: np.ndarray, h: float) -> 
         q = bmin + (np.floor((p - bmin) / h) + frac) * h   # keep it off background-mesh faces
         if foam_io.points_inside(q[None], alltris)[0]:
             return [float(x) for x in q]
-    raise ValueError("could not find a point inside the vessel surface; set mesh.inside_point")
+    raise VCSInputError("could not find a point inside the vessel surface; set mesh.inside_point")
 
 
 def _context(state: dict, **extra) -> dict:
@@ -264,18 +266,18 @@ def render_case(case_dir, stl_path, cfd: dict | None = None, *, flavour: str | N
     cfd = deep_merge(DEFAULTS, cfd)
     flavour = flavour or cfd.get("flavour") or detect_openfoam()[0] or "esi"
     if flavour not in FLAVOURS:
-        raise ValueError(f"unknown OpenFOAM flavour {flavour!r}; known: {sorted(FLAVOURS)}")
+        raise VCSInputError(f"unknown OpenFOAM flavour {flavour!r}; known: {sorted(FLAVOURS)}")
     cfd["flavour"] = flavour
     if cfd["inlet"]["type"] not in ("jet", "uniform", "parabolic"):
-        raise ValueError(f"inlet.type must be jet, uniform or parabolic, not {cfd['inlet']['type']!r}")
+        raise VCSInputError(f"inlet.type must be jet, uniform or parabolic, not {cfd['inlet']['type']!r}")
     fl = FLAVOURS[flavour]
 
     solids = foam_io.read_stl_solids(stl_path)
     roles = {k: _role(k) for k in solids}
     if sum(r == "inlet" for r in roles.values()) != 1:
-        raise ValueError(f"the STL needs exactly one inlet solid, found {list(solids)}")
+        raise VCSInputError(f"the STL needs exactly one inlet solid, found {list(solids)}")
     if not any(r == "outlet" for r in roles.values()):
-        raise ValueError(f"the STL has no outlet solid: {list(solids)}")
+        raise VCSInputError(f"the STL has no outlet solid: {list(solids)}")
     pts = np.concatenate([t.reshape(-1, 3) for t in solids.values()])
     lo, hi = pts.min(0), pts.max(0)
     m = cfd["mesh"]
@@ -331,7 +333,7 @@ def inlet_profile(case_dir: Path, state: dict) -> dict:
         r_jet = np.sqrt(float(inlet["valve_area"]) / np.pi)
         shape = (r <= r_jet).astype(float)
         if shape.sum() == 0:
-            raise ValueError("jet disc contains no inlet face centre: refine the inlet or enlarge valve_area")
+            raise VCSInputError("jet disc contains no inlet face centre: refine the inlet or enlarge valve_area")
     elif kind == "uniform":
         shape = np.ones_like(r)
     else:  # parabolic over the equivalent-circle radius of the inlet
