@@ -10,9 +10,9 @@ from vcs.io import UNIT_TO_MM
 
 
 def _positive_int(text: str) -> int:
-    from vcs.cli import _positive_int as check
+    from vcs.cli import _positive_int as parse  # vcs.cli imports this module: import late
 
-    return check(text)
+    return parse(text)
 
 
 def cmd_wall(args) -> None:
