@@ -50,14 +50,6 @@ class RigidTransform:
         """Transform (..., 3) points."""
         return self.scale * np.asarray(points, float) @ self.rotation.T + self.translation
 
-    def compose(self, first: "RigidTransform") -> "RigidTransform":
-        """self o first (apply ``first``, then ``self``)."""
-        return RigidTransform(
-            self.rotation @ first.rotation,
-            self.scale * first.translation @ self.rotation.T + self.translation,
-            self.scale * first.scale,
-        )
-
     def inverse(self) -> "RigidTransform":
         r = self.rotation.T
         return RigidTransform(r, -(self.translation @ r.T) / self.scale, 1.0 / self.scale)

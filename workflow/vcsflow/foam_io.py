@@ -248,13 +248,3 @@ def _isnum(s: str) -> bool:
         return True
     except ValueError:
         return False
-
-
-# -------------------------------------------------------------- field files
-
-
-def format_vector_list(values: np.ndarray) -> str:
-    lines = [f"nonuniform List<vector>\n{len(values)}\n("]
-    lines += [f"({v[0]:.10g} {v[1]:.10g} {v[2]:.10g})" for v in values]
-    lines.append(")")
-    return "\n".join(lines)
