@@ -90,6 +90,11 @@ class VesselCoordinateSystem:
             outlet, rev = _point_end_plane(vertices, faces, lumen, outlet, path[::-1])
             path = rev[::-1]
         t_path = time.perf_counter()
+        if n_knots > max(9, len(path)):  # at most one knot per path voxel (the default always fits)
+            raise VCSInputError(
+                f"L = {n_knots} centerline knots is too many for a lumen path of {len(path)} voxels; "
+                f"use L <= {max(9, len(path))} (paper default 9)"
+            )
         pts = np.vstack([inlet.center, path, outlet.center])
         dirs = None
         if inlet.normal is not None and outlet.normal is not None:  # end planes known: meet them square

@@ -97,3 +97,9 @@ def test_bad_coordinate_tables_and_models_give_one_line(tmp_path, content):
     (tmp_path / "bad.json").write_text(json.dumps(model))
     r = run("wall", tmp_path / "bad.json", "-o", tmp_path / "w.stl")
     assert r.returncode == 2 and "not a valid model.json" in r.stderr
+
+
+def test_absurd_L_is_named_in_the_error(tmp_path):
+    write_stl(make_phantom("tube", resolution=2.0), tmp_path / "t.stl")
+    r = run("fit", tmp_path / "t.stl", "-o", tmp_path / "o", "--units", "mm", "--L", "500")
+    assert r.returncode == 2 and "L = 500" in r.stderr and len(r.stderr.strip().splitlines()) == 1
