@@ -233,40 +233,21 @@ def write_points_vtp(path, points: np.ndarray, point_data: dict | None = None) -
 def read_points_table(path) -> np.ndarray:
     """Read (N, 3) points from ``.npy`` or ``.csv`` (header optional, columns x,y,z)."""
     path = Path(path)
-    if not path.is_file():
-        raise VCSInputError(f"points file '{path}' does not exist; check the path")
-    try:
-        if path.suffix.lower() == ".npy":
-            arr = np.load(path, allow_pickle=False)
-        elif path.suffix.lower() == ".csv":
-            arr = _read_csv_columns(path, ("x", "y", "z"))
-        else:
-            raise VCSInputError(f"unsupported points file '{path}'; give a .csv (x,y,z) or .npy (N, 3)")
-    except VCSInputError:
-        raise
-    except Exception as exc:
-        raise VCSInputError(f"cannot read points from '{path}' ({exc}); give x,y,z columns") from None
-    arr = np.asarray(arr, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise VCSInputError(f"'{path}' holds an array of shape {arr.shape}; expected (N, 3) points")
-    return arr
+    if path.is_file() and path.suffix.lower() not in (".npy", ".csv"):
+        raise VCSInputError(f"unsupported points file '{path}'; give a .csv (x,y,z) or .npy (N, 3)")
+    return read_table_columns(path, ("x", "y", "z"), header_required=False, what="points file")
 
 
-def _read_csv_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:
-    with open(path) as fh:
-        first = fh.readline().strip()
-    header = [h.strip().lower() for h in first.split(",")]
-    if all(n in header for n in names):
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-        return data[:, [header.index(n) for n in names]]
-    return np.loadtxt(path, delimiter=",", ndmin=2)[:, : len(names)]
+def read_table_columns(path, names: tuple[str, ...], *, header_required: bool = True,
+                       what: str = "file") -> np.ndarray:
+    """Read named columns of a CSV (or an (N, len(names)) ``.npy``) as an (N, len(names)) array.
 
-
-def read_table_columns(path, names: tuple[str, ...]) -> np.ndarray:
-    """Read named columns of a CSV with a header (or an (N, len(names)) ``.npy``)."""
+    Without ``header_required``, a CSV whose first line does not name the columns is read as
+    headerless, its first ``len(names)`` columns in order.
+    """
     path = Path(path)
     if not path.is_file():
-        raise VCSInputError(f"file '{path}' does not exist; check the path")
+        raise VCSInputError(f"{what} '{path}' does not exist; check the path")
     try:
         if path.suffix.lower() == ".npy":
             arr = np.load(path, allow_pickle=False)
@@ -274,21 +255,20 @@ def read_table_columns(path, names: tuple[str, ...]) -> np.ndarray:
             with open(path) as fh:
                 header = [h.strip().lower() for h in fh.readline().strip().split(",")]
             missing = [n for n in names if n not in header]
-            if missing:
+            if missing and header_required:
                 raise VCSInputError(f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}")
-            arr = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+            arr = np.loadtxt(path, delimiter=",", skiprows=0 if missing else 1, ndmin=2)
             if arr.size == 0:
-                raise VCSInputError(f"'{path}' has a header but no rows; give at least one row")
-            arr = arr[:, [header.index(n) for n in names]]
+                raise VCSInputError(f"'{path}' has no data rows; give at least one row")
+            arr = arr[:, : len(names)] if missing else arr[:, [header.index(n) for n in names]]
         arr = np.asarray(arr, dtype=float)
     except VCSInputError:
         raise
     except Exception as exc:
         raise VCSInputError(f"cannot read '{path}' ({type(exc).__name__}: {exc}); give numeric "
                             f"{','.join(names)} columns") from None
-    arr = np.asarray(arr, dtype=float)
     if arr.ndim != 2 or arr.shape[1] != len(names):
-        raise VCSInputError(f"'{path}' has shape {arr.shape}; expected {len(names)} columns")
+        raise VCSInputError(f"'{path}' holds an array of shape {arr.shape}; expected {len(names)} columns")
     return arr
 
 
