@@ -59,7 +59,7 @@ def _write_json(path: Path, data: dict) -> None:
 
 
 def cmd_fit(args) -> None:
-    from vcs.io import write_points_vtp, write_polyline_vtp
+    from vcs.mesh import write_points_vtp, write_polyline_vtp
     from vcs.vessel import fit_vessel
 
     out = _out_dir(args.output)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vcs.errors import VCSInputError
+from vcs.mesh import boundary_loops, edge_topology, polygon_properties, triangle_areas, triangle_cross
 
 log = logging.getLogger(__name__)
 
@@ -46,59 +47,6 @@ class Ends:
     warnings: list = field(default_factory=list)
 
 
-def edge_topology(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges (E, 2) of a triangle list and how many faces use each."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e.sort(axis=1)
-    edges, counts = np.unique(e, axis=0, return_counts=True)
-    return edges, counts
-
-
-def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Closed loops of boundary edges (edges used by one face), as ordered vertex index arrays."""
-    edges, counts = edge_topology(faces)
-    bnd = edges[counts == 1]
-    if len(bnd) == 0:
-        return []
-    nbrs: dict[int, list[int]] = {}
-    for a, b in bnd.tolist():
-        nbrs.setdefault(a, []).append(b)
-        nbrs.setdefault(b, []).append(a)
-    unvisited = set(nbrs)
-    loops = []
-    while unvisited:
-        start = min(unvisited)
-        loop = [start]
-        unvisited.discard(start)
-        prev, cur = None, start
-        while True:
-            nxt = [n for n in nbrs[cur] if n != prev and n in unvisited]
-            if not nxt:
-                break
-            prev, cur = cur, nxt[0]
-            loop.append(cur)
-            unvisited.discard(cur)
-        if len(loop) >= 3:
-            loops.append(np.array(loop))
-    return loops
-
-
-def polygon_properties(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Area centroid, unit normal (Newell) and area of a closed, roughly planar polygon."""
-    p = np.asarray(points, float)
-    ref = p.mean(axis=0)
-    a, b = p - ref, np.roll(p, -1, axis=0) - ref
-    cross = np.cross(a, b)  # fan triangles (ref, p_i, p_i+1), doubled areas
-    n = cross.sum(axis=0)
-    area = 0.5 * np.linalg.norm(n)
-    if area <= 0:
-        return ref, np.array([0.0, 0.0, 1.0]), 0.0
-    unit = n / np.linalg.norm(n)
-    w = cross @ unit
-    centroid = ref + (w[:, None] * (a + b) / 3.0).sum(axis=0) / w.sum()
-    return centroid, unit, area
-
-
 def _inward(center: np.ndarray, normal: np.ndarray, radius: float, vertices: np.ndarray) -> np.ndarray:
     """Orient a plane normal at an end towards the wall vertices near that end (into the lumen)."""
     d = vertices - center
@@ -132,7 +80,7 @@ def _fan_caps(vertices: np.ndarray, loops: list[np.ndarray]) -> tuple[np.ndarray
 
 def _end_from_faces(vertices, faces, source) -> End:
     tri = vertices[faces]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    cross = triangle_cross(tri)
     area2 = np.linalg.norm(cross, axis=1)
     area = 0.5 * area2.sum()
     center = (tri.mean(axis=1) * area2[:, None]).sum(axis=0) / max(area2.sum(), 1e-300)
@@ -200,8 +148,7 @@ def find_ends(
                 uniq = np.unique(labels)
                 if len(uniq) < 3:
                     continue
-                tri = vertices[faces]
-                areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+                areas = triangle_areas(vertices, faces)
                 wall_label = max(uniq, key=lambda u: areas[labels == u].sum())
                 wall_mask = labels == wall_label
                 for u in uniq:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from vcs.errors import VCSInputError
+from vcs.mesh import consistent_winding, triangle_cross
 
 log = logging.getLogger(__name__)
 
@@ -134,7 +135,7 @@ def read_surface(path, units: str = "auto", *, check_extent: bool = True) -> Sur
     }
     warnings = []
     tri = vertices[faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area2 = np.linalg.norm(triangle_cross(tri), axis=1)
     degenerate = (area2 <= 1e-12 * max(float(np.ptp(vertices)), 1e-300) ** 2) | (faces[:, 0] == faces[:, 1]) \
         | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     if degenerate.any():
@@ -160,74 +161,6 @@ def read_surface(path, units: str = "auto", *, check_extent: bool = True) -> Sur
             )
     vertices = vertices * UNIT_TO_MM[units]
     return Surface(vertices, faces, cell_data, units, source, str(path), tuple(warnings))
-
-
-def consistent_winding(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Make triangle winding consistent across shared manifold edges. Returns (faces, changed).
-
-    Some exporters (e.g. STL from segmentation tools) mix windings; normals, and the star-convexity
-    test of the wall fit, need them consistent. Breadth-first over the face-adjacency graph
-    (scipy.sparse.csgraph): a face is flipped when it traverses an edge shared with its BFS parent
-    in the same direction as the parent does.
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, connected_components
-
-    m = len(faces)
-    he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])  # directed half-edges
-    fid = np.tile(np.arange(m), 3)
-    key = np.sort(he, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
-    manifold = cnt[inv] == 2
-    order = np.argsort(inv[manifold], kind="stable")
-    pair_f = fid[manifold][order].reshape(-1, 2)
-    pair_he = he[manifold][order].reshape(-1, 2, 2)
-    same_dir = np.all(pair_he[:, 0] == pair_he[:, 1], axis=1)  # inconsistent pair
-    if not same_dir.any():
-        return faces, False
-    # graph weight 1 = consistent, 2 = flip relative to the neighbour
-    w = np.where(same_dir, 2, 1)
-    G = coo_matrix((np.concatenate([w, w]), (np.concatenate(pair_f.T), np.concatenate(pair_f[:, ::-1].T))),
-                   shape=(m, m)).tocsr()
-    n_comp, labels = connected_components(G, directed=False)
-    pair_f = pair_f.astype(np.int64)
-    pair_key = np.concatenate([pair_f[:, 0] * m + pair_f[:, 1], pair_f[:, 1] * m + pair_f[:, 0]])
-    pair_w = np.concatenate([w, w])
-    srt = np.argsort(pair_key)
-    pair_key, pair_w = pair_key[srt], pair_w[srt]
-    flip = [False] * m
-    for c in range(n_comp):
-        root = int(np.flatnonzero(labels == c)[0])
-        nodes, pred = breadth_first_order(G, root, directed=False, return_predecessors=True)
-        child, parent = nodes[1:].astype(np.int64), pred[nodes[1:]].astype(np.int64)
-        swap = (pair_w[np.searchsorted(pair_key, child * m + parent)] == 2).tolist()
-        for f, p, sw in zip(child.tolist(), parent.tolist(), swap):  # parents come first in BFS order
-            flip[f] = flip[p] ^ sw
-    flip = np.array(flip)
-    out = faces.copy()
-    out[flip] = out[flip][:, ::-1]
-    return out, True
-
-
-def write_polyline_vtp(path, points: np.ndarray, point_data: dict | None = None) -> None:
-    """Write a single polyline with optional point arrays as VTP."""
-    import pyvista as pv
-
-    poly = pv.lines_from_points(np.asarray(points, dtype=float))
-    for name, values in (point_data or {}).items():
-        poly.point_data[name] = np.asarray(values)
-    poly.save(str(path))
-
-
-def write_points_vtp(path, points: np.ndarray, point_data: dict | None = None) -> None:
-    """Write a point cloud with point arrays as VTP."""
-    import pyvista as pv
-
-    poly = pv.PolyData(np.asarray(points, dtype=float))
-    for name, values in (point_data or {}).items():
-        poly.point_data[name] = np.asarray(values)
-    poly.save(str(path))
 
 
 def read_points_table(path) -> np.ndarray:

@@ -13,6 +13,7 @@ from vcs.centerline import VoxelLumen, arc_length_table, astar_path, fit_centerl
 from vcs.ends import End, Ends
 from vcs.errors import VCSInputError
 from vcs.frame import ParallelTransportFrame, initial_v1
+from vcs.mesh import triangle_cross
 
 log = logging.getLogger(__name__)
 
@@ -104,7 +105,7 @@ class VesselCoordinateSystem:
 
         wall_faces = faces[ends.wall_mask]
         tri = vertices[wall_faces]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        area = 0.5 * np.linalg.norm(triangle_cross(tri), axis=1)
         centroid = (tri.mean(axis=1) * area[:, None]).sum(axis=0) / area.sum()
         w_vert = np.bincount(wall_faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices))
         used = w_vert > 0

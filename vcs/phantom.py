@@ -28,7 +28,6 @@ Only numpy and scipy are used (no mesh libraries), so the module can run anywher
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -36,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
 from vcs.frame import rotation_minimizing_frame
+from vcs.mesh import write_stl_binary
 
 __all__ = ["Phantom", "make_phantom", "sweep_tube", "write_stl", "KINDS", "AORTA_EDGE_SCALE"]
 
@@ -732,19 +732,6 @@ def make_phantom(kind: str, *, seed: int = 0, resolution: float = 1.0, **overrid
 
 
 def write_stl(phantom: Phantom, path) -> None:
-    """Binary STL (single solid, float32, outward facet normals) of ``phantom``'s open surface."""
-    V = np.asarray(phantom.vertices, float)
-    F = np.asarray(phantom.faces)
-    tri = V[F]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    n = np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
-    rec = np.zeros(len(F), dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
-    rec["n"] = n
-    rec["v"] = tri
-    header = f"vcs phantom kind={phantom.kind} seed={phantom.params.get('seed', 0)} units=mm".encode()[:80]
-    path = Path(path)
-    with open(path, "wb") as fh:
-        fh.write(header.ljust(80, b" "))
-        fh.write(np.array([len(F)], dtype="<u4").tobytes())
-        rec.tofile(fh)
+    """Binary STL (single solid, float32, outward facet normals) of ``phantom``'s open surface (mm)."""
+    header = f"vcs phantom kind={phantom.kind} seed={phantom.params.get('seed', 0)} units=mm"
+    write_stl_binary(path, np.asarray(phantom.vertices, float), np.asarray(phantom.faces), header)

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from vcs.errors import VCSInputError
+from vcs.mesh import orient_outward, write_stl_ascii
 
 TWO_PI = 2.0 * np.pi
 
@@ -136,40 +137,15 @@ def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
     V = np.concatenate(all_v)
     F = np.concatenate(all_f)
     S = np.concatenate(all_s)
-    F = _orient_outward(V, F)
+    F = orient_outward(V, F)
     return WallMesh(V, F, S)
 
 
-def _orient_outward(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Make every face consistent with its neighbours and the enclosed volume positive."""
-    from vcs.io import consistent_winding
-
-    F, _ = consistent_winding(V, F)
-    if signed_volume(V, F) < 0:
-        F = F[:, ::-1]
-    return F
-
-
-def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
-    tri = V[F]
-    return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
-
-
 def write_multisolid_stl(mesh: WallMesh, path, scale: float = 1.0) -> None:
-    """ASCII STL with one solid per patch name (what snappyHexMesh needs for patch names)."""
+    """ASCII STL with one solid per patch name (what snappyHexMesh needs for patch names);
+    coordinates multiplied by ``scale`` (e.g. 1e-3: mm -> m)."""
     V = mesh.vertices * scale
-    with open(path, "w") as fh:
-        for k, name in enumerate(WallMesh.SOLIDS):
-            F = mesh.faces[mesh.solid == k]
-            tri = V[F]
-            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-            fh.write(f"solid {name}\n")
-            block = np.concatenate([n[:, None], tri], axis=1).reshape(-1, 12)
-            fmt = ("facet normal {:.9e} {:.9e} {:.9e}\n outer loop\n  vertex {:.9e} {:.9e} {:.9e}\n"
-                   "  vertex {:.9e} {:.9e} {:.9e}\n  vertex {:.9e} {:.9e} {:.9e}\n endloop\nendfacet\n")
-            fh.write("".join(fmt.format(*row) for row in block.tolist()))
-            fh.write(f"endsolid {name}\n")
+    write_stl_ascii(path, {name: V[mesh.faces[mesh.solid == k]] for k, name in enumerate(WallMesh.SOLIDS)})
 
 
 @dataclass(frozen=True)

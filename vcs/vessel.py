@@ -12,6 +12,7 @@ import numpy as np
 from vcs.ends import find_ends
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
+from vcs.mesh import connected_faces, triangle_areas
 from vcs.model import VesselCoordinateSystem
 from vcs.wall import WallFit, WallModel, fit_wall
 
@@ -129,19 +130,13 @@ class VesselModel:
 
 def largest_component(surf: Surface) -> Surface:
     """Keep the connected component of largest area; the others are reported in ``warnings``."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     f = surf.faces
     n = len(surf.vertices)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    n_comp, lab = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
-    face_lab = lab[f[:, 0]]
+    face_lab = connected_faces(f, n)
     used = np.unique(face_lab)
     if len(used) <= 1:
         return surf
-    tri = surf.vertices[f]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = triangle_areas(surf.vertices, f)
     per = np.bincount(face_lab, area)
     keep_lab = int(np.argmax(per))
     keep = face_lab == keep_lab

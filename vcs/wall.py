@@ -17,6 +17,7 @@ from scipy.interpolate import BSpline, NdBSpline
 
 from vcs.centerline import uniform_knots
 from vcs.errors import VCSInputError
+from vcs.mesh import triangle_cross, vertex_adjacency, vertex_normals
 
 log = logging.getLogger(__name__)
 
@@ -146,23 +147,6 @@ class WallFit:
 REASONS = {0: "used", 1: "beyond_end_planes", 2: "outside_omega", 3: "not_first_crossing", 4: "branch"}
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals (orientation as given by the winding; `fit_wall` orients them
-    outward by a majority vote)."""
-    tri = vertices[faces]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(n, faces[:, k], cross)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-
-
-def _rings(faces: np.ndarray, n_vertices: int) -> sparse.csr_matrix:
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    A = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices))
-    return ((A + A.T) > 0).tocsr()
-
-
 def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: int = 15,
              smoothing: float = 1e-5, branch_rel: float = 0.12, grow_rel: float = 0.3,
              orientation: float | None = None) -> WallFit:
@@ -200,7 +184,7 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
     reason[used_v[~valid & ~at_end]] = 2
 
     tri = vertices[faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = 0.5 * np.linalg.norm(triangle_cross(tri), axis=1)
     w = np.bincount(faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices))
     normals = vertex_normals(vertices, faces)
     c = vcs.curve(np.nan_to_num(tau))
@@ -218,7 +202,7 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
             f"only {(reason == 0).sum()} wall vertices lie inside the section, fewer than the {n_min} wall "
             f"coefficients (K={K}, R={R}); the mesh is too coarse: remesh it finer or lower --K/--R"
         )
-    adj = _rings(faces, len(vertices))
+    adj = vertex_adjacency(faces, len(vertices))
     # branch regions are grown by ~ grow_rel x the vessel radius (the ostium's flare), in rings
     edge_len = np.linalg.norm(tri[:, 0] - tri[:, 1], axis=1).mean()
     n_grow = int(np.clip(np.ceil(grow_rel * np.nanmedian(rho[reason == 0]) / edge_len), 1, 30))

@@ -8,7 +8,8 @@ import pytest
 
 from vcs.io import Surface
 from vcs.phantom import make_phantom
-from vcs.surface import signed_volume, wall_mesh
+from vcs.mesh import signed_volume
+from vcs.surface import wall_mesh
 from vcs.vessel import VesselModel, fit_vessel
 from vcs.wall import lsq_wall, periodic_design_matrix
 

@@ -1,0 +1,126 @@
+#!/usr/bin/env python3
+"""Check that a code change leaves the numbers alone (refactorings must be bit-identical).
+
+    python scripts/same_results.py fits OUT_DIR         # vcs fit on a fixed corpus -> OUT_DIR/<name>/
+    python scripts/same_results.py compare DIR_A DIR_B  # exit 1 unless every result file matches
+
+``fits`` runs ``vcs fit`` (this checkout's code) with default settings on the three CI aorta
+phantoms, a tube, a torus and a helix phantom, and on every real mesh of ``../shared/data``
+that is present. ``compare`` walks two result trees (e.g. ``results/`` of two CI-cohort runs,
+``snakemake --configfile config/ci.yaml`` before and after a change, or two ``fits`` folders)
+and compares every ``model.json``, ``fit_report.json`` (timings left out), ``wall.stl`` and
+phantom STL byte by byte, and every ``fields.npz`` array by array (dtype, shape and bits; an npz
+archive also stores its write time, so its bytes differ between runs).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared" / "data" / "vessels"
+PHANTOMS = [("aorta", 0), ("aorta", 1), ("aorta", 2), ("tube", 0), ("torus", 0), ("helix", 0)]
+REAL = {
+    "simvascular_open": ("simvascular_aorta_segment_open.vtp", []),
+    "simvascular_capped": ("simvascular_aorta_segment_capped.vtp", []),
+    "vmtk_closed": ("vmtk_aorta_segment_closed.stl", ["--inlet=219.0,290.0,25.0", "--outlet=221.3,146.5,21.7"]),
+    "vmtk_bifurcation": ("vmtk_aorta_bifurcation_open.stl", ["--inlet=221,177.8,21.3", "--outlet=210.2,102.9,30.8"]),
+    "aortacfd": ("aortacfd_patient1/wall_aorta.stl", ["--inlet-cap", "aortacfd_patient1/inlet.stl",
+                                                      "--outlet-cap", "aortacfd_patient1/outlet4.stl"]),
+}
+BYTE_FILES = ("model.json", "wall.stl")
+VOLATILE_REPORT_KEYS = ("timings_s", "mesh")  # wall-clock times; the input path
+
+
+def _vcs(*args: str) -> None:
+    cmd = [sys.executable, "-m", "vcs.cli", *args]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
+
+
+def run_fits(out: Path) -> None:
+    """vcs fit of the fixed corpus into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    for kind, seed in PHANTOMS:
+        name = f"{kind}_seed{seed}"
+        stl = out / "phantoms" / f"{name}.stl"
+        stl.parent.mkdir(exist_ok=True)
+        _vcs("phantom", "--kind", kind, "--seed", str(seed), "--resolution", "1.5", "-o", str(stl))
+        _vcs("fit", str(stl), "-o", str(out / name), "--units", "mm")
+        print(f"fitted {name}")
+    if not SHARED.is_dir():
+        print(f"{SHARED} absent: real meshes skipped")
+        return
+    for name, (mesh, opts) in REAL.items():
+        opts = [str(SHARED / o) if o.endswith(".stl") else o for o in opts]
+        _vcs("fit", str(SHARED / mesh), "-o", str(out / name), *opts)
+        print(f"fitted {name}")
+
+
+def _strip_volatile(d):
+    if isinstance(d, dict):
+        return {k: _strip_volatile(v) for k, v in d.items() if k not in VOLATILE_REPORT_KEYS}
+    if isinstance(d, list):
+        return [_strip_volatile(v) for v in d]
+    return d
+
+
+def _same_npz(a: Path, b: Path) -> str | None:
+    with np.load(a, allow_pickle=False) as za, np.load(b, allow_pickle=False) as zb:
+        if sorted(za.files) != sorted(zb.files):
+            return f"arrays {sorted(za.files)} vs {sorted(zb.files)}"
+        for k in za.files:
+            x, y = za[k], zb[k]
+            if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
+                return f"array '{k}' differs"
+    return None
+
+
+def compare(a: Path, b: Path) -> int:
+    """Compare the result files of two trees; print one line per file; 0 when all match."""
+    names = ("model.json", "fit_report.json", "wall.stl", "fields.npz")
+    files = sorted({p.relative_to(a) for p in a.rglob("*") if p.name in names or p.parent.name == "phantoms"})
+    if not files:
+        print(f"no result files under {a}")
+        return 1
+    bad = 0
+    for rel in files:
+        pa, pb = a / rel, b / rel
+        if not pb.exists():
+            why = "missing in B"
+        elif rel.name == "fields.npz":
+            why = _same_npz(pa, pb)
+        elif rel.name == "fit_report.json":
+            ja, jb = (_strip_volatile(json.loads(p.read_text())) for p in (pa, pb))
+            why = None if ja == jb else "differs (timings and input path ignored)"
+        else:
+            why = None if pa.read_bytes() == pb.read_bytes() else "bytes differ"
+        bad += why is not None
+        print(f"{'SAME' if why is None else 'DIFF'}  {rel}" + (f": {why}" if why else ""))
+    print(f"{len(files) - bad} of {len(files)} result files identical")
+    return 1 if bad else 0
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    f = sub.add_parser("fits", help="fit the fixed corpus into OUT")
+    f.add_argument("out", type=Path)
+    c = sub.add_parser("compare", help="compare two result trees")
+    c.add_argument("a", type=Path)
+    c.add_argument("b", type=Path)
+    args = p.parse_args()
+    if args.cmd == "fits":
+        run_fits(args.out)
+        return 0
+    return compare(args.a, args.b)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
