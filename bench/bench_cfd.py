@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark the OpenFOAM pipeline (vcsflow.openfoam) on STL files.
+"""Benchmark the OpenFOAM pipeline (vcs.cfd) on STL files.
 
     python bench/bench_cfd.py vessel1.stl vessel2.stl [--ranks 2] [--cell-size 1e-3]
                               [--inlet jet|uniform|parabolic] [--max-iterations 2000] [--set solver.relax_U=0.7]
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from vcsflow.openfoam import render_case, run_case
+from vcs.cfd import render_case, run_case
 
 
 def _set(cfg: dict, dotted: str) -> None:
@@ -58,8 +58,8 @@ def main(argv=None) -> int:
     work.mkdir(parents=True, exist_ok=True)
     stls = list(a.stl)
     if a.demo_tube:
-        from vcsflow.foam_geometry import write_tube_stl
-        stls.append(write_tube_stl(work / "demo_tube.stl", radius=0.01, length=0.2, n_z=100, axis=(0.03, 0.02, 1.0)))
+        from vcs.phantoms.analytic import write_closed_tube_stl
+        stls.append(write_closed_tube_stl(work / "demo_tube.stl", radius=0.01, length=0.2, n_z=100, axis=(0.03, 0.02, 1.0)))
     if not stls:
         ap.error("give STL files or --demo-tube")
 

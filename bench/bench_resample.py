@@ -24,10 +24,10 @@ def tube_case(tmp: Path):
     """The tests' straight-tube Hagen-Poiseuille case and its model (tests/vcs/test_resample.py)."""
     sys.path.insert(0, str(ROOT / "tests" / "vcs"))
     from test_resample import AXIS, LENGTH_MM, RADIUS_MM, U_MEAN, straight_model
-    from vcsflow.foam_geometry import write_tube_stl
-    from vcsflow.openfoam import render_case, run_case
+    from vcs.phantoms.analytic import write_closed_tube_stl
+    from vcs.cfd import render_case, run_case
 
-    stl = write_tube_stl(tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS)
+    stl = write_closed_tube_stl(tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS)
     cfg = {"mesh": {"cell_size": 1.25e-3}, "inlet": {"type": "parabolic", "flow_rate": U_MEAN * np.pi * (RADIUS_MM * 1e-3) ** 2},
            "solver": {"max_iterations": 800, "startup_iterations": 50, "fallback": "none"}}
     render_case(tmp / "case", stl, cfg, flavour="esi")
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args(argv)
 
-    from vcs.resample import sample_case
+    from vcs.cfd import sample_case
     from vcs.vessel import VesselModel
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -13,7 +13,8 @@ from vcs.errors import VCSInputError
 from vcs.io import Surface, read_surface
 from vcs.model import VesselCoordinateSystem
 from vcs.phantom import Phantom, make_phantom
-from vcs.surface import MeasurementGrid, WallMesh, measurement_grid, wall_mesh
+from vcs.grid import MeasurementGrid, measurement_grid
+from vcs.surface import WallMesh, wall_mesh
 from vcs.vessel import VesselModel, fit_vessel
 from vcs.wall import WallFit, WallModel, fit_wall
 

@@ -338,7 +338,7 @@ def flow_vector(fields: dict, name: str, *, frame: str = "vcs") -> np.ndarray:
     """
     key = f"{name}_vcs" if frame == "vcs" and name in ("U", "WSS") else name
     if key not in fields:
-        raise VCSInputError(f"the resampled fields have no '{key}'; resample the case with vcs.resample.sample_case")
+        raise VCSInputError(f"the resampled fields have no '{key}'; resample the case with vcs.cfd.resample.sample_case")
     return np.asarray(fields[key], float).ravel()
 
 
@@ -442,7 +442,7 @@ def status_exclusion(status: dict | None, *, accept_relaxed: bool = False) -> st
     """Reason to exclude a patient from its case ``status.json`` (None: include).
 
     Excluded when the file is missing, ``failed`` is true, ``status``/``state`` names a failure,
-    or ``converged`` is false (vcsflow.openfoam writes ``converged`` and ``reason``). With
+    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``). With
     ``accept_relaxed``, a case whose SIMPLE run did not converge but whose time-averaged fallback
     met the relaxed criterion (``converged_relaxed`` true) is included. The reason quotes the
     status's own ``reason``/``error``/``message``.
@@ -487,7 +487,7 @@ def compute_atlas(models: dict, fields: dict, statuses: dict, *, n_modes: int = 
     Parameters
     ----------
     models : {patient id: VesselModel}
-    fields : {patient id: dict of resampled arrays} (as returned by :func:`vcs.resample.sample_case`
+    fields : {patient id: dict of resampled arrays} (as returned by :func:`vcs.cfd.resample.sample_case`
         or loaded from ``fields.npz``); a patient without fields is excluded.
     statuses : {patient id: status dict or None} from each case's status.json; see
         :func:`status_exclusion`. Patients absent from ``statuses`` count as included.

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from vcs.atlas import TWO_PI, VECTOR_FIELDS, Atlas, PCA, mode_deformation, top_variation_mask
-from vcs.resample import from_vcs_components, grid_points, grid_to_vtk, local_frame
+from vcs.grid import from_vcs_components, grid_points, grid_to_vtk, local_frame
 
 log = logging.getLogger(__name__)
 

@@ -35,7 +35,7 @@ def cmd_wall(args) -> None:
 def cmd_grid(args) -> None:
     import pyvista as pv
 
-    from vcs.surface import measurement_grid
+    from vcs.grid import measurement_grid
     from vcs.vessel import VesselModel
 
     model = VesselModel.load(args.model)

@@ -1,4 +1,4 @@
-"""The model's wall as a closed triangle mesh (paper Eq. 8) and measurement grids.
+"""The model's wall as a closed triangle mesh (paper Eq. 8).
 
 x(tau, theta) = c(tau) + rho_w(tau, theta) (v1(tau) cos theta + v2(tau) sin theta) on a regular
 tau-theta grid, optional straight flow extensions, flat caps; multi-solid STL for snappyHexMesh.
@@ -146,83 +146,3 @@ def write_multisolid_stl(mesh: WallMesh, path, scale: float = 1.0) -> None:
     coordinates multiplied by ``scale`` (e.g. 1e-3: mm -> m)."""
     V = mesh.vertices * scale
     write_stl_ascii(path, {name: V[mesh.faces[mesh.solid == k]] for k, name in enumerate(WallMesh.SOLIDS)})
-
-
-@dataclass(frozen=True)
-class MeasurementGrid:
-    """Hexahedral grid of the lumen in (tau, theta, rho_n): ``points`` (N, 3) mm, ``cells``
-    (C, 8) point indices (VTK hexahedron order), and the VCS coordinates of every point."""
-
-    points: np.ndarray
-    cells: np.ndarray
-    tau: np.ndarray
-    theta: np.ndarray
-    rho_n: np.ndarray
-
-
-def _section_pattern(n_theta: int, n_rho: int, scheme: str):
-    """2-D cross-section pattern: (P, 2) points in the unit disk, (Q, 4) quads and (P,) theta.
-
-    ``cylindrical``: polar rings rho_n = k / n_rho (k = 0 collapses to the axis: degenerate quads
-    there, as in the paper's grid). ``ogrid``: a Cartesian core square (half-width 0.5 / sqrt 2,
-    n_theta / 4 cells a side) blended ring by ring into the circle rho_n = 1, no degenerate cell.
-    """
-    if scheme == "cylindrical":
-        th = np.linspace(0, TWO_PI, n_theta, endpoint=False)
-        r = np.linspace(0, 1, n_rho + 1)
-        P = (r[:, None, None] * np.stack([np.cos(th), np.sin(th)], -1)[None]).reshape(-1, 2)
-        idx = np.arange((n_rho + 1) * n_theta).reshape(n_rho + 1, n_theta)
-        a, b = idx[:-1], idx[1:]
-        Q = np.stack([a, b, np.roll(b, -1, 1), np.roll(a, -1, 1)], -1).reshape(-1, 4)  # CCW about t
-        return P, Q, np.tile(th, n_rho + 1)  # theta of the axis points: their pattern angle
-    if scheme != "ogrid":
-        raise VCSInputError(f"unknown grid scheme '{scheme}'; use cylindrical or ogrid")
-    if n_theta % 4:
-        raise VCSInputError(f"--n-theta {n_theta} must be a multiple of 4 for the ogrid scheme")
-    m = n_theta // 4
-    half = 0.5 / np.sqrt(2.0)
-    g = np.linspace(-half, half, m + 1)
-    X, Y = np.meshgrid(g, g, indexing="ij")
-    core = np.column_stack([X.ravel(), Y.ravel()])
-    cid = np.arange((m + 1) ** 2).reshape(m + 1, m + 1)
-    Qc = np.stack([cid[:-1, :-1], cid[1:, :-1], cid[1:, 1:], cid[:-1, 1:]], -1).reshape(-1, 4)
-    # boundary of the core, counter-clockwise from (half, -half) ... as a ring of 4 m points
-    ring_ids = np.concatenate([cid[m, :m], cid[m:0:-1, m], cid[0, m:0:-1], cid[:m, 0]])
-    sq = core[ring_ids]
-    ang = np.arctan2(sq[:, 1], sq[:, 0])
-    circ = np.column_stack([np.cos(ang), np.sin(ang)])
-    n_out = max(1, n_rho - n_rho // 2)
-    P = [core]
-    prev = ring_ids
-    Q = [Qc]
-    start = len(core)
-    for k in range(1, n_out + 1):
-        s = k / n_out
-        ring = (1 - s) * sq + s * circ
-        ids = start + np.arange(len(ring))
-        P.append(ring)
-        Q.append(np.stack([prev, ids, np.roll(ids, -1), np.roll(prev, -1)], -1))  # CCW about t
-        prev, start = ids, start + len(ring)
-    P, Q = np.concatenate(P), np.concatenate(Q)
-    return P, Q, np.mod(np.arctan2(P[:, 1], P[:, 0]), TWO_PI)
-
-
-def measurement_grid(model, *, n_tau: int = 64, n_theta: int = 32, n_rho: int = 8,
-                     scheme: str = "cylindrical") -> MeasurementGrid:
-    """The regular (tau, theta, rho_n) grid mapped through the model (paper Section 2.4.2):
-    x = c(tau) + rho_n rho_w(tau, theta) (v1 cos theta + v2 sin theta)."""
-    if model.wall is None:
-        raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
-    if min(n_tau, n_theta, n_rho) < 1 or n_theta < 4:
-        raise VCSInputError("grid sizes must be positive (n_theta >= 4)")
-    P, Q, theta = _section_pattern(n_theta, n_rho, scheme)
-    rho_n = np.linalg.norm(P, axis=1)
-    tau = np.linspace(0, 1, n_tau + 1)
-    T = np.repeat(tau, len(P))
-    TH = np.tile(theta, len(tau))
-    RN = np.tile(rho_n, len(tau))
-    pts = model.vcs.to_cartesian(T, TH, RN * model.wall(T, TH))
-    n = len(P)
-    layer = np.arange(n_tau)[:, None, None] * n
-    cells = np.concatenate([Q[None] + layer, Q[None] + layer + n], axis=2).reshape(-1, 8)
-    return MeasurementGrid(pts, cells, T, TH, RN)

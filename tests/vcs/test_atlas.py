@@ -144,7 +144,7 @@ def test_status_exclusion_reasons():
 
 
 def synthetic_fields(model: VesselModel, q: float, n=(9, 8, 5)) -> dict:
-    """Poiseuille-like fields on the VCS grid, mean velocity q, as vcs.resample writes them."""
+    """Poiseuille-like fields on the VCS grid, mean velocity q, as vcs.cfd.sample_case writes them."""
     nt, nth, nr = n
     tau = np.linspace(0, 1, nt)
     theta = 2 * np.pi * np.arange(nth) / nth

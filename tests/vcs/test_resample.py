@@ -9,7 +9,7 @@ from scipy.interpolate import BSpline
 
 from vcs.centerline import uniform_knots
 from vcs.model import VesselCoordinateSystem
-from vcs.resample import (grid_to_vtk, load_fields, local_frame, sample_grid, sample_mesh, to_vcs_components,
+from vcs.cfd.resample import (grid_to_vtk, load_fields, local_frame, grid_axes, sample_mesh, to_vcs_components,
                           from_vcs_components, write_fields)
 from vcs.vessel import VesselModel
 from vcs.wall import WallModel
@@ -72,7 +72,7 @@ def tube_mesh():
 
 def test_grid_and_frame_components_round_trip():
     m = straight_model()
-    tau, theta, rho_n = sample_grid(5, 8, 3)
+    tau, theta, rho_n = grid_axes(5, 8, 3)
     assert tau[0] == 0 and tau[-1] == 1 and rho_n[-1] == 1 and theta[-1] < 2 * np.pi
     F = local_frame(m, tau, theta)
     np.testing.assert_allclose(np.einsum("ijab,ijcb->ijac", F, F), np.broadcast_to(np.eye(3), F.shape), atol=1e-12)
@@ -131,21 +131,21 @@ def test_sample_mesh_far_outside_counts_nearest(tube_mesh):
 # --------------------------------------------------------------- real OpenFOAM (colleague's runner)
 def _foam_api():
     try:
-        from vcsflow.foam_geometry import write_tube_stl
-        from vcsflow.openfoam import detect_openfoam, render_case, run_case
+        from vcs.phantoms.analytic import write_closed_tube_stl
+        from vcs.cfd import detect_openfoam, render_case, run_case
     except ImportError as exc:  # pragma: no cover - depends on the checkout
-        pytest.skip(f"vcsflow.openfoam not importable ({exc})")
+        pytest.skip(f"vcs.cfd not importable ({exc})")
     if shutil.which("simpleFoam") is None or detect_openfoam()[0] != "esi":
         pytest.skip("Debian's ESI OpenFOAM (simpleFoam) not installed")
-    return write_tube_stl, render_case, run_case
+    return write_closed_tube_stl, render_case, run_case
 
 
 @pytest.fixture(scope="module")
 def poiseuille_case(tmp_path_factory):
-    """The Hagen-Poiseuille tube of tests/workflow/test_openfoam.py, solved by vcsflow.openfoam."""
-    write_tube_stl, render_case, run_case = _foam_api()
+    """The Hagen-Poiseuille tube of tests/workflow/test_openfoam.py, solved by vcs.cfd."""
+    write_closed_tube_stl, render_case, run_case = _foam_api()
     tmp = tmp_path_factory.mktemp("pois_resample")
-    stl = write_tube_stl(tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS)
+    stl = write_closed_tube_stl(tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS)
     q = U_MEAN * np.pi * (RADIUS_MM * 1e-3) ** 2
     cfg = {"mesh": {"cell_size": 1.25e-3}, "inlet": {"type": "parabolic", "flow_rate": q},
            "solver": {"max_iterations": 800, "startup_iterations": 50, "fallback": "none"}}
@@ -156,7 +156,7 @@ def poiseuille_case(tmp_path_factory):
 
 @pytest.mark.openfoam
 def test_sample_case_hagen_poiseuille(poiseuille_case, tmp_path):
-    from vcs.resample import sample_case
+    from vcs.cfd import sample_case
 
     case, status = poiseuille_case
     assert status["converged"], status.get("reason")

@@ -1,4 +1,4 @@
-"""vcsflow.openfoam: templates (both flavours) and real OpenFOAM runs (marker ``openfoam``)."""
+"""vcs.cfd: templates (both flavours) and real OpenFOAM runs (marker ``openfoam``)."""
 from __future__ import annotations
 
 import re
@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vcsflow.foam_geometry import write_tube_stl
-from vcsflow.openfoam import DEFAULTS, detect_openfoam, render_case, run_case
+from vcs.phantoms.analytic import write_closed_tube_stl
+from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case
 
 R = 0.01            # tube radius [m]
 L = 0.12            # tube length [m]
-AXIS = np.array([0.03, 0.02, 1.0]) / np.linalg.norm([0.03, 0.02, 1.0])  # ~2 deg tilt: see write_tube_stl
+AXIS = np.array([0.03, 0.02, 1.0]) / np.linalg.norm([0.03, 0.02, 1.0])  # ~2 deg tilt: see write_closed_tube_stl
 Q_POIS = 2.0e-5     # m3/s -> U_mean 0.064 m/s, Re = 378 (parabolic inlet: developed from the start)
 HAVE_FOAM = shutil.which("simpleFoam") is not None and detect_openfoam()[0] == "esi"
 needs_foam = pytest.mark.skipif(not HAVE_FOAM, reason="Debian's ESI OpenFOAM (simpleFoam) not installed")
@@ -26,7 +26,7 @@ POIS_CFG = {
 
 
 def _tube(tmp: Path, axis=AXIS, length=L) -> Path:
-    return write_tube_stl(tmp / "tube.stl", radius=R, length=length, n_theta=96, n_z=60, axis=axis)
+    return write_closed_tube_stl(tmp / "tube.stl", radius=R, length=length, n_theta=96, n_z=60, axis=axis)
 
 
 # ----------------------------------------------------------------- rendering (no OpenFOAM)
@@ -190,7 +190,7 @@ def test_serial_and_parallel_agree(poiseuille_serial):
 @pytest.mark.openfoam
 @needs_foam
 def test_jet_inlet_flux(tmp_path):
-    stl = write_tube_stl(tmp_path / "tube.stl", radius=R, length=0.06, n_theta=96, n_z=30)
+    stl = write_closed_tube_stl(tmp_path / "tube.stl", radius=R, length=0.06, n_theta=96, n_z=30)
     cfg = {"mesh": {"cell_size": 1.25e-3},
            "solver": {"max_iterations": 30, "startup_iterations": 10, "fallback": "average",
                       "average_iterations": 20}}

@@ -1,4 +1,4 @@
-# OpenFOAM case set-up (vcsflow.render_case): dictionaries from templates/openfoam + the wall STL.
+# OpenFOAM case set-up (vcs.cfd.render_case): dictionaries from templates/openfoam + the wall STL.
 
 
 rule openfoam_case:

@@ -35,7 +35,7 @@ def _package_versions():
 
 def _openfoam():
     try:
-        from vcsflow.openfoam import FLAVOURS, detect_openfoam
+        from vcs.cfd import FLAVOURS, detect_openfoam
 
         flavour, version = detect_openfoam()
     except Exception as exc:  # provenance must never fail a run

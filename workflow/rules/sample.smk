@@ -1,4 +1,4 @@
-# Resampling of the CFD fields onto the patient's (tau, theta, rho_n) grid (vcs.resample).
+# Resampling of the CFD fields onto the patient's (tau, theta, rho_n) grid (vcs.cfd.resample).
 
 
 rule fields_sample:

@@ -47,7 +47,7 @@ def main(smk):
             fh.write(EMPTY_VTU)
         return
 
-    from vcs.resample import sample_case, write_fields
+    from vcs.cfd import sample_case, write_fields
     from vcs.vessel import VesselModel
 
     grid = dict(smk.params.grid)

@@ -1,4 +1,4 @@
-"""Rule openfoam_case: render the OpenFOAM case of one patient (vcsflow.render_case)."""
+"""Rule openfoam_case: render the OpenFOAM case of one patient (vcs.cfd.render_case)."""
 import json
 import sys
 from pathlib import Path
@@ -11,7 +11,7 @@ SETUP_FAILED = "SETUP_FAILED.json"  # read by openfoam_solve.py
 
 
 def main(smk):
-    from vcsflow.openfoam import render_case
+    from vcs.cfd import render_case
 
     cfd = json.loads(json.dumps(dict(smk.params.cfd)))  # plain dicts/lists
     flavour = cfd.pop("flavour", "auto")

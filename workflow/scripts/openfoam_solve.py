@@ -1,4 +1,4 @@
-"""Rule openfoam_solve: mesh and solve one patient (vcsflow.run_case) in a copy of its case set-up.
+"""Rule openfoam_solve: mesh and solve one patient (vcs.cfd.run_case) in a copy of its case set-up.
 
 A per-patient failure (meshing, divergence, not converged) is NOT a job failure: it is written to
 status.json (converged false, reason) for the atlas to exclude the patient. Only a broken set-up
@@ -17,7 +17,7 @@ log = _common.setup(snakemake, "openfoam_solve")  # noqa: F821
 
 
 def main(smk):
-    from vcsflow.openfoam import detect_openfoam, run_case
+    from vcs.cfd import detect_openfoam, run_case
 
     if detect_openfoam()[0] is None:
         raise FileNotFoundError("no OpenFOAM installation found (simpleFoam not on PATH); run `bash scripts/install.sh`")
@@ -37,7 +37,7 @@ def main(smk):
     except Exception as exc:  # a crash on this patient must not stop the cohort: record it
         log.error("run_case crashed\n%s", traceback.format_exc())
         status = {"converged": False, "failed": True, "case": smk.output.case,
-                  "reason": f"vcsflow.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}",
+                  "reason": f"vcs.cfd.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}",
                   "failed_log": str(Path(smk.log[0]).resolve())}
     status["patient"] = smk.wildcards.id
     with open(smk.output.status, "w") as fh:

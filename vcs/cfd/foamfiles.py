@@ -1,6 +1,5 @@
-"""Small, dependency-light readers/writers used by :mod:`vcsflow.openfoam`.
+"""Reading OpenFOAM's own files, dependency-light (used while a case runs):
 
-* multi-solid ASCII STL reader (solid names, triangles, bounds, point-in-surface test)
 * ASCII ``constant/polyMesh`` reader for boundary patches (face centres / area vectors)
 * solver-log parser (initial residuals, continuity errors, convergence message)
 * ``postProcessing/*/*.dat`` reader (surfaceFieldValue output)
@@ -13,61 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
-
-# --------------------------------------------------------------------------- STL
-
-
-def read_stl_solids(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a multi-solid ASCII STL -> {solid name: (n, 3, 3) triangle vertices}."""
-    solids: dict[str, list] = {}
-    name = None
-    tri: list = []
-    with open(path, "r", encoding="ascii", errors="replace") as fh:
-        for line in fh:
-            tok = line.split()
-            if not tok:
-                continue
-            key = tok[0].lower()
-            if key == "solid":
-                name = tok[1] if len(tok) > 1 else "solid"
-                solids.setdefault(name, [])
-            elif key == "vertex":
-                tri.append([float(tok[1]), float(tok[2]), float(tok[3])])
-                if len(tri) == 3:
-                    solids.setdefault(name or "solid", []).append(tri)
-                    tri = []
-            elif key == "endsolid":
-                name = None
-    if not solids:
-        raise VCSInputError(f"{path}: no ASCII STL solids found (binary STL is not supported)")
-    return {k: np.asarray(v, dtype=float).reshape(-1, 3, 3) for k, v in solids.items()}
-
-
-def triangle_area_vectors(tris: np.ndarray) -> np.ndarray:
-    return 0.5 * np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-
-
-def points_inside(points: np.ndarray, tris: np.ndarray, direction=(0.5773, 0.5774, 0.5775)) -> np.ndarray:
-    """Ray-parity point-in-closed-surface test (Moeller-Trumbore, vectorised over triangles)."""
-    d = np.asarray(direction, float)
-    d = d / np.linalg.norm(d)
-    v0, v1, v2 = tris[:, 0], tris[:, 1], tris[:, 2]
-    e1, e2 = v1 - v0, v2 - v0
-    h = np.cross(d, e2)
-    a = np.einsum("ij,ij->i", e1, h)
-    ok = np.abs(a) > 1e-30
-    f = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
-    out = []
-    for p in np.atleast_2d(points):
-        s = p - v0
-        u = f * np.einsum("ij,ij->i", s, h)
-        q = np.cross(s, e1)
-        v = f * (q @ d)
-        t = f * np.einsum("ij,ij->i", e2, q)
-        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
-        out.append(int(hit.sum()) % 2 == 1)
-    return np.asarray(out)
-
 
 # ----------------------------------------------------------------- polyMesh (ascii)
 

@@ -21,7 +21,7 @@ frame (``U_vcs``, ``WSS_vcs``: components along t(tau), e_theta = -v1 sin theta 
 e_rho = v1 cos theta + v2 sin theta), which are invariant to rigid motions and are what the atlas
 compares across patients.
 
-This is the only atlas module that reads OpenFOAM (pyvista's POpenFOAMReader).
+The grid itself is :mod:`vcs.grid`; this module reads the case (pyvista's POpenFOAMReader).
 """
 from __future__ import annotations
 
@@ -34,57 +34,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
+from vcs.grid import GRID_DEFAULTS, grid_points, grid_to_vtk, local_frame, grid_axes, to_vcs_components
 
 log = logging.getLogger(__name__)
-
-TWO_PI = 2.0 * np.pi
-GRID_DEFAULTS = {"n_tau": 64, "n_theta": 32, "n_rho": 11}
-
-
-# ---------------------------------------------------------------------------------------------
-# The measurement grid (pure numpy)
-# ---------------------------------------------------------------------------------------------
-def sample_grid(n_tau: int, n_theta: int, n_rho: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """1-D tau (n_tau,) in [0, 1], theta (n_theta,) = 2 pi j / n_theta, rho_n (n_rho,) in [0, 1]."""
-    if min(n_tau, n_theta, n_rho) < 2:
-        raise VCSInputError(f"the grid needs n_tau, n_theta, n_rho >= 2, got {n_tau}, {n_theta}, {n_rho}")
-    return np.linspace(0.0, 1.0, n_tau), TWO_PI * np.arange(n_theta) / n_theta, np.linspace(0.0, 1.0, n_rho)
-
-
-def grid_points(model, tau, theta, rho_n) -> tuple[np.ndarray, np.ndarray]:
-    """Grid points (n_tau, n_theta, n_rho, 3) in mm and rho_w (n_tau, n_theta) in mm."""
-    if model.wall is None:
-        raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
-    T, TH = np.meshgrid(tau, theta, indexing="ij")
-    rho_w = model.wall(T, TH)
-    rho = rho_w[:, :, None] * np.asarray(rho_n)[None, None, :]
-    pts = model.vcs.to_cartesian(T[:, :, None], TH[:, :, None], rho)
-    return pts, rho_w
-
-
-def local_frame(model, tau, theta) -> np.ndarray:
-    """(n_tau, n_theta, 3, 3): rows e_t, e_theta, e_rho of the VCS frame at each (tau, theta)."""
-    t, v1, v2 = model.vcs.frame(np.asarray(tau, float))
-    c, s = np.cos(theta)[None, :, None], np.sin(theta)[None, :, None]
-    t, v1, v2 = t[:, None, :], v1[:, None, :], v2[:, None, :]
-    e_rho = c * v1 + s * v2
-    e_th = -s * v1 + c * v2
-    return np.stack(np.broadcast_arrays(t, e_th, e_rho), axis=-2)
-
-
-def to_vcs_components(vectors: np.ndarray, frame: np.ndarray) -> np.ndarray:
-    """Cartesian vectors (n_tau, n_theta, [n_rho,] 3) -> (u_t, u_theta, u_rho) in the local frame."""
-    if vectors.ndim == 4:
-        return np.einsum("ijab,ijkb->ijka", frame, vectors)
-    return np.einsum("ijab,ijb->ija", frame, vectors)
-
-
-def from_vcs_components(components: np.ndarray, frame: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`to_vcs_components`."""
-    if components.ndim == 4:
-        return np.einsum("ijab,ijka->ijkb", frame, components)
-    return np.einsum("ijab,ija->ijb", frame, components)
-
 
 # ---------------------------------------------------------------------------------------------
 # Reading a case
@@ -237,7 +189,7 @@ def sample_mesh(internal, patches: dict, model, *, n_tau: int = GRID_DEFAULTS["n
     if method not in ("mls", "probe"):
         raise VCSInputError(f"method must be 'mls' or 'probe', not {method!r}")
     t0 = _time.perf_counter()
-    tau, theta, rho_n = sample_grid(n_tau, n_theta, n_rho)
+    tau, theta, rho_n = grid_axes(n_tau, n_theta, n_rho)
     pts_mm, rho_w = grid_points(model, tau, theta, rho_n)
     shape = pts_mm.shape[:3]
     P = pts_mm.reshape(-1, 3) * rho_scale
@@ -362,34 +314,6 @@ COUNT_KEYS = ("n_points", "n_outside_mesh", "n_wall_noslip", "n_wall_outside_mes
 def summary(fields: dict) -> dict:
     """Counts and timings of a resampling as plain JSON values."""
     return {k: fields[k].item() for k in COUNT_KEYS if k in fields}
-
-
-def grid_to_vtk(points: np.ndarray, point_arrays: dict | None = None, *, close_theta: bool = True):
-    """A (n_tau, n_theta, n_rho) or (n_tau, n_theta) grid as a pyvista UnstructuredGrid/PolyData.
-
-    With ``close_theta`` the theta = 0 layer is repeated at 2 pi so the surface has no seam.
-    Arrays have the grid's leading shape (plus a trailing 3 for vectors).
-    """
-    import pyvista as pv
-
-    point_arrays = point_arrays or {}
-    if close_theta:
-        points = np.concatenate([points, points[:, :1]], axis=1)
-        point_arrays = {k: np.concatenate([v, v[:, :1]], axis=1) for k, v in point_arrays.items()}
-    if points.ndim == 3:
-        points = points[:, :, None]
-        point_arrays = {k: v[:, :, None] for k, v in point_arrays.items()}
-    n0, n1, n2 = points.shape[:3]
-    g = pv.StructuredGrid()
-    g.points = points.transpose(2, 1, 0, 3).reshape(-1, 3)  # VTK: first index fastest
-    g.dimensions = (n0, n1, n2)
-    for k, v in point_arrays.items():
-        v = np.asarray(v)
-        tail = v.shape[3:]
-        g.point_data[k] = v.transpose(2, 1, 0, *range(3, v.ndim)).reshape(-1, *tail)
-    if n2 == 1:
-        return g.extract_surface(algorithm="dataset_surface")
-    return g.cast_to_unstructured_grid()
 
 
 def write_fields(fields: dict, npz_path, *, vtu_path=None) -> None:
