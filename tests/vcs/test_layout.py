@@ -58,7 +58,7 @@ def _statements(path: Path) -> list[ast.Import | ast.ImportFrom]:
 def _imported_names(module: str, path: Path, modules: dict[str, Path]) -> set[str]:
     """Absolute dotted names a file imports: ``import a.b`` -> a.b; ``from a.b import c`` -> a.b.c
     when that is a module of ``modules``, else a.b; relative imports resolved against ``module``."""
-    names = set()
+    names: set[str] = set()
     for node in _statements(path):
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
@@ -133,7 +133,11 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
         shortest cycle ``[a, b, ..., a]`` through its alphabetically first module; empty when
         the graph is acyclic.
     """
-    index, low, on_stack, stack, sccs = {}, {}, set(), [], []
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    sccs: list[set[str]] = []
 
     def visit(v: str) -> None:
         index[v] = low[v] = len(index)
@@ -162,7 +166,12 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     out = []
     for scc in sccs:
         start = min(scc)
-        path = _path(graph, start, lambda n, start=start: start in graph.get(n, ()), within=scc)
+
+        def closes_cycle(n: str, start: str = start) -> bool:
+            return start in graph.get(n, ())
+
+        path = _path(graph, start, closes_cycle, within=scc)
+        assert path is not None  # a strongly connected component has a cycle through each member
         out.append(path + [start])
     return out
 
@@ -170,15 +179,14 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def _path(graph: dict[str, set[str]], start: str, goal: Callable[[str], bool],
           within: set[str] | None = None) -> list[str] | None:
     """Shortest import chain start -> ... -> n with ``goal(n)`` (breadth first), or None."""
-    prev = {start: None}
+    prev: dict[str, str | None] = {start: None}
     queue = deque([start])
     while queue:
         n = queue.popleft()
         if goal(n):
-            chain = []
-            while n is not None:
-                chain.append(n)
-                n = prev[n]
+            chain = [n]
+            while (p := prev[chain[-1]]) is not None:
+                chain.append(p)
             return chain[::-1]
         for w in sorted(graph.get(n, ())):
             if w not in prev and (within is None or w in within):

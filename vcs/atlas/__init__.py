@@ -21,10 +21,27 @@ the plotting module only when it writes figures.
 """
 from vcs.atlas.build import build_atlas
 from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas, project_model, status_exclusion
-from vcs.atlas.pca import (FLOW_FIELDS, PCA, SHAPE_BLOCKS, VECTOR_FIELDS, flow_vector, mode_deformation,
-                           shape_matrix, top_variation_mask)
-from vcs.atlas.procrustes import (TWO_PI, RigidTransform, align_models, check_compatible, generalized_procrustes,
-                                  procrustes, transform_model, wall_grid, wall_grid_points)
+from vcs.atlas.pca import (
+    FLOW_FIELDS,
+    PCA,
+    SHAPE_BLOCKS,
+    VECTOR_FIELDS,
+    flow_vector,
+    mode_deformation,
+    shape_matrix,
+    top_variation_mask,
+)
+from vcs.atlas.procrustes import (
+    TWO_PI,
+    RigidTransform,
+    align_models,
+    check_compatible,
+    generalized_procrustes,
+    procrustes,
+    transform_model,
+    wall_grid,
+    wall_grid_points,
+)
 from vcs.atlas.regression import DEFAULT_ALPHAS, ridge_loo
 
 __all__ = [

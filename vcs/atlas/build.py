@@ -52,7 +52,7 @@ def build_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    loaded = {}
+    loaded: dict[str, Mapping[str, Any]] = {}
     for pid, f in fields.items():
         if isinstance(f, (str, Path)):
             with np.load(f) as z:
@@ -61,7 +61,8 @@ def build_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[
             loaded[pid] = f
     atlas = compute_atlas(models, loaded, statuses, n_modes=n_modes, **options)
     summary = atlas_summary(atlas)
-    arrays = {**atlas.shape.arrays("shape"), **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{f}").items()}}
+    arrays: dict[str, Any] = {**atlas.shape.arrays("shape"),
+                              **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{f}").items()}}
     arrays.update({f"grid_{k}": v for k, v in atlas.grid.items()})
     np.savez_compressed(out / "atlas.npz", **arrays)
     if figures:

@@ -12,8 +12,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from vcs.atlas.pca import FLOW_FIELDS, PCA, flow_vector, shape_matrix
-from vcs.atlas.procrustes import (RigidTransform, align_models, check_compatible, procrustes, transform_model,
-                                  wall_grid_points)
+from vcs.atlas.procrustes import (
+    RigidTransform,
+    align_models,
+    check_compatible,
+    procrustes,
+    transform_model,
+    wall_grid_points,
+)
 from vcs.atlas.regression import ridge_loo
 from vcs.errors import VCSInputError
 
@@ -155,7 +161,8 @@ def compute_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mappin
     patients = [pid for pid in models if pid not in excluded]
     if len(patients) < 3:
         raise VCSInputError(f"an atlas needs at least 3 included patients, got {len(patients)} (excluded: {excluded})")
-    shapes0 = {f: np.shape(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f]) for f in flow_fields}
+    shapes0 = {f: np.shape(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f])
+               for f in flow_fields}
     for pid in patients:
         for f in flow_fields:
             key = f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f
@@ -245,11 +252,13 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         "shape_scores": {p: s.tolist() for p, s in zip(atlas.patients, atlas.shape.scores)},
         "flow_explained_variance": {f: pca.explained_variance_ratio.tolist() for f, pca in atlas.flow.items()},
         "flow_sigma": {f: pca.sigma.tolist() for f, pca in atlas.flow.items()},
-        "flow_scores": {f: {p: s.tolist() for p, s in zip(atlas.patients, pca.scores)} for f, pca in atlas.flow.items()},
+        "flow_scores": {f: {p: s.tolist() for p, s in zip(atlas.patients, pca.scores)}
+                        for f, pca in atlas.flow.items()},
         "shape_to_flow_regression": {
             "method": "ridge on the first k standardised shape scores, alpha by inner leave-one-out; "
                       "R^2 by outer leave-one-out (1 - PRESS / SS_tot)",
             "k_shape_scores": atlas.options["n_regression_scores"],
-            "loo_r2": {f: [None if not np.isfinite(v) else float(v) for v in r["r2"]] for f, r in atlas.regression.items()},
+            "loo_r2": {f: [None if not np.isfinite(v) else float(v) for v in r["r2"]]
+                       for f, r in atlas.regression.items()},
         },
     }

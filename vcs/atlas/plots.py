@@ -1,7 +1,9 @@
 """Atlas figures and geometry files: VTP/VTU (pyvista) and PNG (pyvista off-screen, matplotlib Agg).
 
 Imports the atlas statistics (:mod:`vcs.atlas.procrustes`, :mod:`vcs.atlas.pca`,
-:mod:`vcs.atlas.cohort`); they never import this module. Everything renders headless. 3-D views use pyvista off-screen; when VTK cannot open an off-screen
+:mod:`vcs.atlas.cohort`); they never import this module.
+
+Everything renders headless. 3-D views use pyvista off-screen; when VTK cannot open an off-screen
 render window (no OSMesa/EGL build, no display), the same figure is drawn with matplotlib as a 2-D
 longitudinal section (tau, signed rho) and the fallback is recorded in the returned file list.
 
@@ -124,7 +126,8 @@ def write_shape_files(pca: PCA, template: VesselModel, out_dir: PathLike, *, n_m
             arrays = {"centerline_displacement": np.repeat(d["centerline_displacement"][:, None], len(d["theta"]), 1),
                       "radius_change": d["radius_change"], "displacement": disp}
             name = f"shape_mode{k + 1}_{tag}{n_sigma:g}sigma.vtp"
-            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]), point_arrays=arrays).save(str(out / name))
+            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]),
+                           point_arrays=arrays).save(str(out / name))
             files[f"shape_mode{k + 1}_{tag}"] = name
             if sign > 0:
                 png = f"shape_mode{k + 1}_deformation.png"
@@ -211,7 +214,8 @@ def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
     """
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=110)
-    series = {"shape": atlas.shape.explained_variance_ratio, **{f: p.explained_variance_ratio for f, p in atlas.flow.items()}}
+    series = {"shape": atlas.shape.explained_variance_ratio,
+              **{f: p.explained_variance_ratio for f, p in atlas.flow.items()}}
     w = 0.8 / len(series)
     for i, (name, v) in enumerate(series.items()):
         ax.bar(np.arange(1, len(v) + 1) + (i - (len(series) - 1) / 2) * w, 100 * v, w, label=name)
@@ -390,7 +394,7 @@ def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -
     """
     out = Path(out_dir)
     grid, info = flow_grid(atlas, mean_model)
-    files = {"flow_mean": "flow_mean.vtu"}
+    files: dict[str, Any] = {"flow_mean": "flow_mean.vtu"}
     grid.save(str(out / files["flow_mean"]))
     theta = atlas.grid["theta"]
     # look at the cut planes from the removed side (theta = 3 pi / 2 at mid tau)
@@ -431,7 +435,7 @@ def write_atlas_figures(atlas: Atlas, out_dir: PathLike) -> dict[str, Any]:
 
     out = Path(out_dir)
     template = atlas.aligned_models[0]
-    files = write_shape_files(atlas.shape, template, out, n_modes=atlas.options["n_modes"])
+    files: dict[str, Any] = write_shape_files(atlas.shape, template, out, n_modes=atlas.options["n_modes"])
     explained_variance_png(atlas, out / "explained_variance.png")
     files["explained_variance"] = "explained_variance.png"
     if atlas.flow and atlas.grid:

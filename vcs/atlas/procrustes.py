@@ -219,7 +219,8 @@ def generalized_procrustes(
             break
     transforms = [procrustes(p, mean, scale=scale) for p in sets]
     rms = [float(np.sqrt(np.mean(np.sum((t(p) - mean) ** 2, axis=1)))) for t, p in zip(transforms, sets)]
-    return transforms, mean, {"iterations": it, "scale": bool(scale), "reference": int(reference), "rms_to_mean_mm": rms}
+    return transforms, mean, {"iterations": it, "scale": bool(scale), "reference": int(reference),
+                              "rms_to_mean_mm": rms}
 
 
 def transform_model(model: VesselModel, transform: RigidTransform) -> VesselModel:
@@ -245,7 +246,8 @@ def transform_model(model: VesselModel, transform: RigidTransform) -> VesselMode
 
     v = model.vcs
     curve = BSpline(v.curve.t, transform(v.control_points), v.curve.k)
-    vcs = VesselCoordinateSystem(curve, transform.rotation @ v.v1_0, v1_0_from=f"{v.v1_0_from}; rotated by the alignment")
+    vcs = VesselCoordinateSystem(curve, transform.rotation @ v.v1_0,
+                                 v1_0_from=f"{v.v1_0_from}; rotated by the alignment")
     wall = model.wall
     if wall is not None and transform.scale != 1.0:
         wall = wall.with_coefficients(wall.coefficients * transform.scale)
@@ -274,7 +276,8 @@ def check_compatible(models: Sequence[VesselModel]) -> None:
             raise VCSInputError(f"model {i} has other centerline knots than model 0; fit every vessel with the same L")
         if (m.wall.K, m.wall.R) != (m0.wall.K, m0.wall.R):
             raise VCSInputError(
-                f"model {i} has wall K, R = {m.wall.K}, {m.wall.R}, model 0 {m0.wall.K}, {m0.wall.R}; fit every vessel with the same K, R"
+                f"model {i} has wall K, R = {m.wall.K}, {m.wall.R}, model 0 {m0.wall.K}, {m0.wall.R}; "
+                "fit every vessel with the same K, R"
             )
 
 

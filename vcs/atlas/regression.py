@@ -4,7 +4,7 @@ Pure numpy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -47,7 +47,7 @@ def _gcv_alpha(X, Y, alphas):
 DEFAULT_ALPHAS = tuple(np.logspace(-6, 4, 21))
 
 
-def ridge_loo(X: ArrayLike, Y: ArrayLike, *, alphas: Sequence[float] = DEFAULT_ALPHAS) -> dict[str, Any]:
+def ridge_loo(X: ArrayLike, Y: ArrayLike, *, alphas: ArrayLike = DEFAULT_ALPHAS) -> dict[str, Any]:
     """Leave-one-out cross-validated ridge regression Y ~ X (beyond the paper).
 
     For each left-out sample, the regularisation alpha is chosen on the remaining samples by
@@ -60,7 +60,7 @@ def ridge_loo(X: ArrayLike, Y: ArrayLike, *, alphas: Sequence[float] = DEFAULT_A
         Predictors, e.g. the first k shape scores (mm).
     Y : (n, m) or (n,) float
         Responses, e.g. flow scores.
-    alphas : sequence of float
+    alphas : (a,) float
         Candidate regularisation strengths (on standardised X); a single value is used as is.
 
     Returns

@@ -22,7 +22,8 @@ def cmd_coords(args: argparse.Namespace) -> None:
     s = model.scale_to_mm
     pts = read_points_table(args.points) * s
     tau, theta, rho, ok = model.vcs.to_vcs(pts)
-    write_csv(not_an_input(args.output, args.points, args.model), {"tau": tau, "theta": theta, "rho": rho / s, "in_omega": ok.astype(int)})
+    write_csv(not_an_input(args.output, args.points, args.model),
+              {"tau": tau, "theta": theta, "rho": rho / s, "in_omega": ok.astype(int)})
     print(f"{len(pts)} points -> {args.output} ({int((~ok).sum())} outside Omega)")
 
 

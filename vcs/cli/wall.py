@@ -66,7 +66,8 @@ def cmd_grid(args: argparse.Namespace) -> None:
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     ug.save(str(out))
-    print(f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, {ug.n_cells} cells -> {out}")
+    print(f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, "
+          f"{ug.n_cells} cells -> {out}")
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
