@@ -224,7 +224,7 @@ def test_sinuses_of_valsalva_visible_in_the_mean_shape(aorta_cohort, tmp_path):
     """The generator's three sinus lobes (tau ~0.03-0.12) survive in the cohort's mean shape as a
     three-fold harmonic of rho_w(theta) (measured ~3.5 % of the radius vs < 0.1 % mid-vessel),
     and the mean-shape figure is written."""
-    from vcs.atlas_plots import mean_shape_png
+    from vcs.atlas.plots import mean_shape_png
     from vcs.vessel import VesselModel
 
     aligned, _ = aorta_cohort

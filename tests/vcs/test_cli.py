@@ -121,7 +121,14 @@ def test_wall_stl_and_grid(tube_stl, tmp_path):
         if scheme == "ogrid":
             assert vol.min() > 0  # no degenerate cell at the axis
         else:
-            assert (vol > 0).mean() > 0.7
+            # node counts as given (the resampling's definition): 10 x 16 x 4 nodes, 9 x 16 x 3 cells;
+            # cells of the radial layers k = 0, 1, 2 (k = 0: wedges at the axis) have volumes in the
+            # ratio of the annuli areas, (k+1)^2 - k^2 = 1 : 3 : 5
+            assert g.n_points == 10 * 16 * 4 and g.n_cells == 9 * 16 * 3
+            layer_vol = np.asarray(vol).reshape(9, 16, 3).sum(axis=(0, 1))
+            np.testing.assert_allclose(layer_vol / layer_vol[0], [1, 3, 5], rtol=0.05)
+            assert np.allclose(np.unique(np.round(g.point_data["rho_n"], 12)), [0, 1 / 3, 2 / 3, 1])
+            assert np.allclose(np.unique(np.round(g.point_data["tau"], 12)), np.linspace(0, 1, 10))
 
 
 def test_inputs_are_never_overwritten(tube_stl, tmp_path):

@@ -1,6 +1,6 @@
 # Cohort atlas (vcs.atlas): coregistration, shape and flow PCA, shape -> flow regression.
 # Patients excluded by their status.json are listed in atlas.json with the reason.
-# atlas.npz and the VTP/VTU files of vcs.atlas_plots are written beside atlas.json; the PNG
+# atlas.npz and the VTP/VTU files of vcs.atlas.plots are written beside atlas.json; the PNG
 # figures are also copied to results/atlas/figures/ for `snakemake --report`.
 
 

@@ -1,5 +1,8 @@
 """Atlas figures and geometry files: VTP/VTU (pyvista) and PNG (pyvista off-screen, matplotlib Agg).
 
+Imports the atlas statistics (:mod:`vcs.atlas.procrustes`, :mod:`vcs.atlas.pca`,
+:mod:`vcs.atlas.cohort`); they never import this module.
+
 Everything renders headless. 3-D views use pyvista off-screen; when VTK cannot open an off-screen
 render window (no OSMesa/EGL build, no display), the same figure is drawn with matplotlib as a 2-D
 longitudinal section (tau, signed rho) and the fallback is recorded in the returned file list.
@@ -20,11 +23,21 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from vcs.atlas import TWO_PI, VECTOR_FIELDS, Atlas, PCA, mode_deformation, top_variation_mask
+from vcs.atlas.cohort import Atlas
+from vcs.atlas.pca import PCA, VECTOR_FIELDS, mode_deformation, top_variation_mask
+from vcs.atlas.procrustes import TWO_PI
 from vcs.grid import from_vcs_components, grid_points, grid_to_vtk, local_frame
+
+if TYPE_CHECKING:
+    import pyvista
+
+    from vcs.vessel import VesselModel
+
+PathLike = str | Path
 
 log = logging.getLogger(__name__)
 
@@ -41,11 +54,23 @@ def _plt():
 # ---------------------------------------------------------------------------------------------
 # Shapes
 # ---------------------------------------------------------------------------------------------
-def shape_polydata(model, *, n_tau: int = 101, n_theta: int = 48, point_arrays: dict | None = None):
+def shape_polydata(model: VesselModel, *, n_tau: int = 101, n_theta: int = 48,
+                   point_arrays: dict[str, np.ndarray] | None = None) -> pyvista.PolyData:
     """Wall surface (Eq. 8 on a (tau, theta) grid, seam closed) plus the centerline as one PolyData.
 
-    ``point_arrays`` are (n_tau, n_theta) arrays on the wall grid; the centerline points get 0.
-    Point data ``tau`` and ``theta`` are always added.
+    Parameters
+    ----------
+    model : VesselModel
+    n_tau, n_theta : int
+        Wall grid: tau in [0, 1] (ends included), theta = 2 pi j / n_theta.
+    point_arrays : dict of (n_tau, n_theta[, ...]) arrays, optional
+        Point data on the wall grid; the centerline points get 0. Point data ``tau`` and
+        ``theta`` are always added.
+
+    Returns
+    -------
+    pyvista.PolyData
+        Points in mm: the wall quads, then the n_tau centerline points as one polyline.
     """
     import pyvista as pv
 
@@ -61,8 +86,30 @@ def shape_polydata(model, *, n_tau: int = 101, n_theta: int = 48, point_arrays: 
     return wall.append_polydata(line)
 
 
-def write_shape_files(pca: PCA, template, out_dir, *, n_modes: int | None = None, n_sigma: float = 2.0) -> dict:
-    """Mean shape and mean +- n_sigma shapes (VTP) and the Fig. 7 deformation PNG per mode."""
+def write_shape_files(pca: PCA, template: VesselModel, out_dir: PathLike, *, n_modes: int | None = None,
+                      n_sigma: float = 2.0) -> dict[str, str]:
+    """Mean shape and mean +- n_sigma shapes (VTP) and the Fig. 7 deformation PNG per mode.
+
+    Parameters
+    ----------
+    pca : PCA
+        Shape PCA of feature vectors.
+    template : VesselModel
+        Rebuilds models from feature vectors (knots, K, R, frame rule).
+    out_dir : str or Path
+        Existing output directory.
+    n_modes : int, optional
+        Modes written (default all).
+    n_sigma : float
+        The +- shapes are mean +- n_sigma sigma_m u_m.
+
+    Returns
+    -------
+    dict
+        {what: file name relative to ``out_dir``}: ``shape_mean`` (VTP), ``shape_mean_png`` and per
+        mode k (1-based) ``shape_mode{k}_plus``, ``shape_mode{k}_minus`` (VTP, mm) and
+        ``shape_mode{k}_deformation`` (PNG).
+    """
     from vcs.vessel import VesselModel
 
     out = Path(out_dir)
@@ -79,7 +126,8 @@ def write_shape_files(pca: PCA, template, out_dir, *, n_modes: int | None = None
             arrays = {"centerline_displacement": np.repeat(d["centerline_displacement"][:, None], len(d["theta"]), 1),
                       "radius_change": d["radius_change"], "displacement": disp}
             name = f"shape_mode{k + 1}_{tag}{n_sigma:g}sigma.vtp"
-            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]), point_arrays=arrays).save(str(out / name))
+            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]),
+                           point_arrays=arrays).save(str(out / name))
             files[f"shape_mode{k + 1}_{tag}"] = name
             if sign > 0:
                 png = f"shape_mode{k + 1}_deformation.png"
@@ -89,9 +137,22 @@ def write_shape_files(pca: PCA, template, out_dir, *, n_modes: int | None = None
     return files
 
 
-def mean_shape_png(mean, path, *, root_taus=(0.0, 0.04, 0.07, 0.1, 0.2)) -> None:
-    """The mean shape's wall radius rho_w(tau, theta) as a map, and its cross-sections near the
-    root as polar curves (the sinuses of Valsalva show as three lobes)."""
+def mean_shape_png(mean: VesselModel, path: PathLike, *,
+                   root_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)) -> None:
+    """PNG of the mean shape's wall radius: a map and cross-sections near the root.
+
+    The wall radius rho_w(tau, theta) (mm) as a map over (tau, theta), and the cross-sections at
+    ``root_taus`` as polar curves (the sinuses of Valsalva show as three lobes).
+
+    Parameters
+    ----------
+    mean : VesselModel
+        The mean shape (a wall model is needed).
+    path : str or Path
+        Output PNG.
+    root_taus : tuple of float
+        tau of the cross-sections, in [0, 1].
+    """
     plt = _plt()
     th = np.linspace(0.0, TWO_PI, 181)
     tau = np.linspace(0.0, 1.0, 201)
@@ -115,8 +176,18 @@ def mean_shape_png(mean, path, *, root_taus=(0.0, 0.04, 0.07, 0.1, 0.2)) -> None
     plt.close(fig)
 
 
-def deformation_png(d: dict, path, *, title: str = "") -> None:
-    """Paper Fig. 7: centerline displacement |delta c(tau)| and radius change delta rho_w(tau, theta)."""
+def deformation_png(d: dict[str, Any], path: PathLike, *, title: str = "") -> None:
+    """PNG of paper Fig. 7: centerline displacement |delta c(tau)| and radius change delta rho_w(tau, theta).
+
+    Parameters
+    ----------
+    d : dict
+        A :func:`vcs.atlas.pca.mode_deformation` result (mm).
+    path : str or Path
+        Output PNG.
+    title : str
+        Figure title (default ``"mode <m + 1>"``).
+    """
     plt = _plt()
     fig, (a0, a1) = plt.subplots(2, 1, figsize=(7, 5.5), dpi=110, sharex=True)
     a0.plot(d["tau"], d["centerline_displacement"], "k-")
@@ -132,10 +203,19 @@ def deformation_png(d: dict, path, *, title: str = "") -> None:
     plt.close(fig)
 
 
-def explained_variance_png(atlas: Atlas, path) -> None:
+def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
+    """PNG bar chart of the explained variance (%) per mode of the shape PCA and each flow PCA.
+
+    Parameters
+    ----------
+    atlas : Atlas
+    path : str or Path
+        Output PNG.
+    """
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=110)
-    series = {"shape": atlas.shape.explained_variance_ratio, **{f: p.explained_variance_ratio for f, p in atlas.flow.items()}}
+    series = {"shape": atlas.shape.explained_variance_ratio,
+              **{f: p.explained_variance_ratio for f, p in atlas.flow.items()}}
     w = 0.8 / len(series)
     for i, (name, v) in enumerate(series.items()):
         ax.bar(np.arange(1, len(v) + 1) + (i - (len(series) - 1) / 2) * w, 100 * v, w, label=name)
@@ -163,11 +243,27 @@ def _scalar(a: np.ndarray) -> np.ndarray:
     return np.linalg.norm(a, axis=-1) if a.ndim == 4 else a
 
 
-def flow_grid(atlas: Atlas, mean_model) -> tuple[object, dict]:
+def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.UnstructuredGrid, dict[str, Any]]:
     """The flow atlas on the mean shape's (tau, theta, rho_n) grid as a pyvista UnstructuredGrid (mm).
 
     Surface fields (WSS, (n_tau, n_theta, 3)) are put on the rho_n = 1 layer (zero inside).
-    Returns (grid, per-field dict of (mean, [(minus, plus, top20 mask) per mode]) arrays on the grid).
+    Vector fields are Cartesian (converted from VCS components when the atlas used them).
+
+    Parameters
+    ----------
+    atlas : Atlas
+        With flow PCAs and the field grid.
+    mean_model : VesselModel
+        The mean shape, whose grid points carry the fields.
+
+    Returns
+    -------
+    grid : pyvista.UnstructuredGrid
+        Point data ``{field}_mean``, ``{field}_mode{k}_plus2sigma``, ``{field}_mode{k}_minus2sigma``,
+        ``{field}_mode{k}_top20`` (uint8 mask) and ``rho_n``.
+    info : dict
+        ``points`` ((n_tau, n_theta, n_rho, 3) float, mm) and ``panels``: {field: {"mean": array,
+        "modes": [(minus, plus, top20 mask) per mode]}}, arrays of shape (n_tau, n_theta, n_rho[, 3]).
     """
     tau, theta, rho_n = atlas.grid["tau"], atlas.grid["theta"], atlas.grid["rho_n"]
     pts, _ = grid_points(mean_model, tau, theta, rho_n)
@@ -209,12 +305,32 @@ def _half(a: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return a[:, keep]
 
 
-def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list, path, *, label: str, view_normal=None) -> str:
-    """Theta-clipped lumen views (paper Figs. 8-9): the half theta in [0, pi] of each panel's grid,
-    so the cut planes theta = 0 and theta = pi show the field inside the lumen.
+def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list[tuple[str, np.ndarray, str]],
+                     path: PathLike, *, label: str, view_normal: np.ndarray | None = None) -> str:
+    """PNG of theta-clipped lumen views (paper Figs. 8-9), one view per panel.
 
-    ``panels`` is a list of (title, (n_tau, n_theta, n_rho) scalar array, cmap). Returns the
-    renderer used (``"pyvista"`` or ``"matplotlib"``).
+    Shows the half theta in [0, pi] of each panel's grid, so the cut planes theta = 0 and
+    theta = pi show the field inside the lumen. Without an off-screen render window, a 2-D
+    longitudinal section (tau, signed rho_n) is drawn with matplotlib instead.
+
+    Parameters
+    ----------
+    points : (n_tau, n_theta, n_rho, 3) float, mm
+        Grid points.
+    theta : (n_theta,) float, rad
+    panels : list of (title, (n_tau, n_theta, n_rho) float array, colour map name)
+        Panels sharing the first panel's colour map share its colour limits.
+    path : str or Path
+        Output PNG.
+    label : str
+        Name (with units) of the scalar shown.
+    view_normal : (3,) float, optional
+        Camera direction from the centre (default +z).
+
+    Returns
+    -------
+    str
+        The renderer used: ``"pyvista"`` or ``"matplotlib"``.
     """
     pts = _half(points, theta)
     try:
@@ -259,10 +375,26 @@ def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list, path, 
     return "matplotlib"
 
 
-def write_flow_files(atlas: Atlas, mean_model, out_dir) -> dict:
+def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -> dict[str, Any]:
+    """flow_mean.vtu (:func:`flow_grid`) and the clipped-view PNG of every field and mode.
+
+    Parameters
+    ----------
+    atlas : Atlas
+    mean_model : VesselModel
+        The mean shape.
+    out_dir : str or Path
+        Existing output directory.
+
+    Returns
+    -------
+    dict
+        {what: file name relative to ``out_dir``}: ``flow_mean`` and ``flow_{field}_mode{k}``,
+        plus ``renderer``: the sorted list of 3-D renderers used (not a file).
+    """
     out = Path(out_dir)
     grid, info = flow_grid(atlas, mean_model)
-    files = {"flow_mean": "flow_mean.vtu"}
+    files: dict[str, Any] = {"flow_mean": "flow_mean.vtu"}
     grid.save(str(out / files["flow_mean"]))
     theta = atlas.grid["theta"]
     # look at the cut planes from the removed side (theta = 3 pi / 2 at mid tau)
@@ -284,14 +416,26 @@ def write_flow_files(atlas: Atlas, mean_model, out_dir) -> dict:
     return files
 
 
-def write_atlas_figures(atlas: Atlas, out_dir) -> dict:
-    """All atlas VTP/VTU/PNG files (see the module doc). Returns {what: file name relative to out_dir}
-    (``renderer`` lists the 3-D renderer(s) used, not files)."""
+def write_atlas_figures(atlas: Atlas, out_dir: PathLike) -> dict[str, Any]:
+    """Write all atlas VTP/VTU/PNG files (see the module doc).
+
+    Parameters
+    ----------
+    atlas : Atlas
+    out_dir : str or Path
+        Existing output directory.
+
+    Returns
+    -------
+    dict
+        ``files``: {what: file name relative to ``out_dir``}; ``renderer``: list of the 3-D
+        renderer(s) used (``"pyvista"``, ``"matplotlib"``), empty without flow figures.
+    """
     from vcs.vessel import VesselModel
 
     out = Path(out_dir)
     template = atlas.aligned_models[0]
-    files = write_shape_files(atlas.shape, template, out, n_modes=atlas.options["n_modes"])
+    files: dict[str, Any] = write_shape_files(atlas.shape, template, out, n_modes=atlas.options["n_modes"])
     explained_variance_png(atlas, out / "explained_variance.png")
     files["explained_variance"] = "explained_variance.png"
     if atlas.flow and atlas.grid:
