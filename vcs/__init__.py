@@ -12,7 +12,7 @@ from vcs.ends import Ends, find_ends
 from vcs.errors import VCSInputError
 from vcs.io import Surface, read_surface
 from vcs.model import VesselCoordinateSystem
-from vcs.phantom import Phantom, make_phantom
+from vcs.phantoms import Phantom, make_phantom
 from vcs.surface import MeasurementGrid, WallMesh, measurement_grid, wall_mesh
 from vcs.vessel import VesselModel, fit_vessel
 from vcs.wall import WallFit, WallModel, fit_wall

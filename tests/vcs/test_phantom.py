@@ -1,4 +1,4 @@
-"""Synthetic phantoms (vcs.phantom) against independent truth.
+"""Synthetic phantoms (vcs.phantoms) against independent truth.
 
 Truth used here never comes from the generator's own geometry code: analytic distances (z-axis,
 torus centre circle, the conftest Helix), polygon-prism volumes, a from-scratch edge/loop
@@ -14,7 +14,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
-from vcs.phantom import KINDS, Phantom, make_phantom, sweep_tube, write_stl
+from vcs.phantoms import KINDS, Phantom, make_phantom, sweep_tube, write_stl
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,109 @@
+"""Analytic phantoms with exact truth: straight tube, torus arc and helix (lengths in mm).
+
+Their centreline, rotation-minimising frame, radius and curvature are known in closed form, so
+tests can compare a VCS fit against analytic values.
+
+``tube``   straight circular tube along +z from the origin (radius 10, length 100).
+``torus``  arc of a torus in the xy-plane, centre circle radius 40 about the origin starting at
+           (40, 0, 0) and turning counter-clockwise by 180 deg, tube radius 8.
+``helix``  c = (a cos u, a sin u, b u), a = 20, pitch 2 pi b = 50, 1.5 turns, tube radius 5.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from vcs.errors import VCSInputError
+from vcs.phantoms.sweep import Phantom, _const_radius, _grid_mesh, _merge, _n_around, _s_array
+
+__all__: list[str] = []
+
+
+def _tube(h: float, **overrides) -> Phantom:
+    p = _merge({"radius_mm": 10.0, "length_mm": 100.0}, overrides, "tube")
+    r0, L = p["radius_mm"], p["length_mm"]
+    if r0 <= 0 or L <= 0:
+        raise VCSInputError("tube phantom: radius_mm and length_mm must be positive")
+    ez, ex, ey = np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]
+
+    def centerline(s):
+        s = _s_array(s)
+        return np.stack([0 * s, 0 * s, L * s], -1)
+
+    def frame(s):
+        n = np.shape(_s_array(s))
+        return tuple(np.broadcast_to(e, n + (3,)).copy() for e in (ez, ex, ey))
+
+    return _circular(centerline, frame, L, r0, h, p)
+
+
+def _circular(centerline, frame, L: float, r0: float, h: float, p: dict):
+    """Mesh of a constant-radius tube of length L around ``centerline`` in ``frame`` (edges ~h)."""
+    n_phi = _n_around(r0, h)
+    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
+    _, v1, v2 = frame(ring)
+    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
+    p.update(length_mm=L, n_phi=n_phi, n_s=len(ring))
+    return V, F, p, centerline, _const_radius(r0), frame, ring
+
+
+def _torus(h: float, **overrides) -> Phantom:
+    p = _merge({"major_radius_mm": 40.0, "tube_radius_mm": 8.0, "arc_angle_deg": 180.0}, overrides, "torus")
+    R, r0, A = p["major_radius_mm"], p["tube_radius_mm"], np.deg2rad(p["arc_angle_deg"])
+    if not (0 < r0 < R) or not (0 < A < 2 * np.pi):
+        raise VCSInputError("torus phantom: need 0 < tube_radius_mm < major_radius_mm and 0 < arc_angle_deg < 360")
+
+    def centerline(s):
+        a = A * _s_array(s)
+        return np.stack([R * np.cos(a), R * np.sin(a), 0 * a], -1)
+
+    def frame(s):
+        a = A * _s_array(s)
+        c, sn, z = np.cos(a), np.sin(a), 0 * a
+        # t, v1 = principal normal (towards the torus axis), v2 = t x v1 = +z
+        return np.stack([-sn, c, z], -1), np.stack([-c, -sn, z], -1), np.stack([z, z, 1 + z], -1)
+
+    return _circular(centerline, frame, R * A, r0, h, p)
+
+
+def _helix(h: float, **overrides) -> Phantom:
+    p = _merge({"helix_radius_mm": 20.0, "pitch_mm": 50.0, "turns": 1.5, "tube_radius_mm": 5.0}, overrides, "helix")
+    a, pitch, turns, r0 = p["helix_radius_mm"], p["pitch_mm"], p["turns"], p["tube_radius_mm"]
+    if min(a, pitch, turns, r0) <= 0:
+        raise VCSInputError("helix phantom: helix_radius_mm, pitch_mm, turns and tube_radius_mm must be positive")
+    b = pitch / (2 * np.pi)
+    w = np.hypot(a, b)
+    U = 2 * np.pi * turns
+    L = w * U
+    kappa, torsion = a / w**2, b / w**2
+    if r0 * kappa >= 0.8:
+        raise VCSInputError(
+            f"helix phantom: tube radius {r0:g} mm must be below 0.8 x the radius of curvature "
+            f"{1 / kappa:.2f} mm; lower tube_radius_mm or raise helix_radius_mm/pitch_mm"
+        )
+    if turns > 1 and pitch <= 2.2 * r0 * w / a:
+        raise VCSInputError(
+            f"helix phantom: successive turns overlap (pitch {pitch:g} mm <= {2.2 * r0 * w / a:.2f} mm); raise pitch_mm"
+        )
+
+    def centerline(s):
+        u = U * _s_array(s)
+        return np.stack([a * np.cos(u), a * np.sin(u), b * u], -1)
+
+    def frame(s):
+        u = U * _s_array(s)
+        c, sn = np.cos(u), np.sin(u)
+        t = np.stack([-a * sn, a * c, np.full_like(u, b)], -1) / w
+        N = np.stack([-c, -sn, 0 * u], -1)
+        B = np.stack([b * sn, -b * c, np.full_like(u, a)], -1) / w
+        ang = -torsion * w * u  # exact rotation-minimising angle from the Frenet normal
+        ca, sa = np.cos(ang)[..., None], np.sin(ang)[..., None]
+        v1 = ca * N + sa * B
+        v2 = ca * B - sa * N
+        return t, v1, v2
+
+    n_phi = _n_around(r0, h)
+    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
+    _, v1, v2 = frame(ring)
+    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
+    p.update(length_mm=L, curvature_radius_mm=1 / kappa, torsion_per_mm=torsion, n_phi=n_phi, n_s=len(ring))
+    return V, F, p, centerline, _const_radius(r0), frame, ring

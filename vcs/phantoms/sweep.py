@@ -1,0 +1,242 @@
+"""Meshing shared by every synthetic phantom: a tube swept around a centreline (lengths in mm).
+
+A phantom's surface is a regular (s, phi) grid of rings around its centreline c(s):
+
+    x(s, phi) = c(s) + r(s, phi) * (cos(phi) v1(s) + sin(phi) v2(s)),
+
+with s in [0, 1] proportional to arc length, {t, v1, v2} a right-handed rotation-minimising frame
+(v2 = t x v1) and phi the angle from v1 towards v2. Each quad of the grid is split into two
+triangles, oriented so that their normals point out of the lumen. The two ends are left open
+(two boundary loops; the loop at s = 0 is the inlet). Vertices are stored ring by ring
+(``params["n_s"]`` rings of ``params["n_phi"]`` vertices, phi_j = 2 pi j / n_phi).
+
+This module holds the :class:`Phantom` record, the ring -> triangle meshing, ring spacing, the
+reach (self-intersection) check, the parameter helpers and the STL writer (through
+:func:`vcs.mesh.write_stl_binary`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from vcs.errors import VCSInputError
+from vcs.frame import rotation_minimizing_frame
+from vcs.mesh import write_stl_binary
+
+__all__ = ["Phantom", "sweep_tube", "write_stl"]
+
+
+@dataclass(frozen=True)
+class Phantom:
+    """A synthetic vessel surface with its exact generating geometry.
+
+    ``centerline(s)`` and ``radius(s, phi)`` take s in [0, 1] (proportional to arc length);
+    ``frame(s)`` returns the generator's rotation-minimising frame ``(t, v1, v2)``, each (n, 3),
+    in which ``phi`` is measured (phi = 0 along v1, pi/2 along v2 = t x v1).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    kind: str
+    params: dict
+    inlet_center: np.ndarray
+    outlet_center: np.ndarray
+    centerline: Callable[[np.ndarray], np.ndarray]
+    radius: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    frame: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+
+
+# ----------------------------------------------------------------------------------------------
+# generic sweep
+
+
+def _grid_mesh(centers, v1, v2, r, phi):
+    """Vertices/faces of the (s, phi) grid; outward when v2 = t x v1 and s runs along t."""
+    centers, v1, v2 = (np.asarray(a, float) for a in (centers, v1, v2))
+    n_s, n_phi = r.shape
+    d = np.cos(phi)[None, :, None] * v1[:, None, :] + np.sin(phi)[None, :, None] * v2[:, None, :]
+    V = (centers[:, None, :] + r[..., None] * d).reshape(-1, 3)
+    idx = np.arange(n_s * n_phi).reshape(n_s, n_phi)
+    a, b = idx[:-1], idx[1:]
+    a2, b2 = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
+    # (a -> a2) runs along +phi, (a2 -> b2) along +s: normal e_phi x t = +e_r (outward)
+    F = np.stack([np.stack([a, a2, b2], -1), np.stack([a, b2, b], -1)], axis=2).reshape(-1, 3)
+    return V, F.astype(np.int64)
+
+
+def _least_aligned_normal(t):
+    axis = np.eye(3)[int(np.argmin(np.abs(t)))]
+    p = axis - (axis @ t) * t
+    return p / np.linalg.norm(p)
+
+
+def sweep_tube(
+    centerline_pts,
+    radius_fn,
+    *,
+    n_phi: int | None = None,
+    edge: float = 1.0,
+    tangents=None,
+    v1_0=None,
+    frames=None,
+):
+    """Open tube around a polyline: one ring of ``n_phi`` vertices per centreline point.
+
+    Parameters
+    ----------
+    centerline_pts : (n, 3) float, n >= 2
+        Ring centres, in order from the inlet (s = 0) to the outlet (s = 1).
+    radius_fn : float or callable ``(s, phi) -> r``
+        Lumen radius; ``s`` is the normalised cumulative polyline length, broadcast as an
+        (n, 1) column against phi as a (1, n_phi) row. Must be positive (star-shaped sections).
+    n_phi : int, optional
+        Vertices per ring. Default: ``ceil(2 pi r_max / edge)`` (at least 8), r_max taken from
+        ``radius_fn`` on a 64-angle probe.
+    edge : float
+        Target circumferential edge (mm) used when ``n_phi`` is not given.
+    tangents : (n, 3) float, optional
+        Unit tangents; default: arc-length finite differences of the polyline.
+    v1_0 : (3,) float, optional
+        v1 at the first point (projected onto its normal plane); default: the coordinate axis
+        least aligned with the first tangent.
+    frames : ((n, 3), (n, 3)), optional
+        Explicit (v1, v2) at every point (bypasses the rotation-minimising transport).
+
+    Returns
+    -------
+    vertices (n * n_phi, 3) float, faces (2 (n - 1) n_phi, 3) int64: outward normals, open ends.
+    """
+    P = np.asarray(centerline_pts, float)
+    if P.ndim != 2 or P.shape[1] != 3 or len(P) < 2:
+        raise VCSInputError("sweep_tube needs centreline points as an (n >= 2, 3) array")
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    if np.any(seg <= 0):
+        raise VCSInputError("sweep_tube: consecutive centreline points must be distinct")
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    s = arc / arc[-1]
+    if tangents is None:
+        t = np.gradient(P, arc, axis=0, edge_order=2 if len(P) > 2 else 1)
+    else:
+        t = np.asarray(tangents, float)
+    t = t / np.linalg.norm(t, axis=1, keepdims=True)
+    if frames is None:
+        if v1_0 is None:
+            v = _least_aligned_normal(t[0])
+        else:
+            v = np.asarray(v1_0, float)
+            v = v - (v @ t[0]) * t[0]
+            v = v / np.linalg.norm(v)
+        v1 = rotation_minimizing_frame(P, t, v)
+        v2 = np.cross(t, v1)
+    else:
+        v1, v2 = (np.asarray(f, float) for f in frames)
+
+    if callable(radius_fn):
+        rfun = radius_fn
+    else:
+        rconst = float(radius_fn)
+        rfun = lambda ss, pp: np.full(np.broadcast_shapes(np.shape(ss), np.shape(pp)), rconst)  # noqa: E731
+    if n_phi is None:
+        probe = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+        r_max = float(np.max(rfun(s[:, None], probe[None, :])))
+        n_phi = max(8, int(np.ceil(2 * np.pi * r_max / edge)))
+    phi = 2 * np.pi * np.arange(n_phi) / n_phi
+    r = np.broadcast_to(rfun(s[:, None], phi[None, :]), (len(P), n_phi)).astype(float)
+    if np.any(r <= 0):
+        raise VCSInputError("sweep_tube: the radius must be positive everywhere")
+    V, F = _grid_mesh(P, v1, v2, r, phi)
+    if np.mean(np.sum(np.cross(v1, v2) * t, axis=1)) < 0:  # left-handed frame: flip to outward
+        F = F[:, ::-1].copy()
+    return V, F
+
+
+# ----------------------------------------------------------------------------------------------
+# grid helpers
+
+
+def _n_around(r: float, h: float) -> int:
+    return max(12, int(np.ceil(2 * np.pi * r / h)))
+
+
+def _ring_s(length: float, mean_r: Callable[[np.ndarray], np.ndarray], n_phi: int) -> np.ndarray:
+    """Ring parameters in [0, 1] with axial spacing equal to the local circumferential edge."""
+    u = np.linspace(0.0, 1.0, 4001)
+    dens = n_phi / (2 * np.pi * mean_r(u)) * length  # rings per unit s
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(u))])
+    n = max(2, int(np.ceil(cum[-1])))
+    s = np.interp(np.linspace(0.0, cum[-1], n + 1), cum, u)
+    s[0], s[-1] = 0.0, 1.0
+    return s
+
+
+def _reach_ok(vertices, ring_s, n_phi, centerline, length, tol_mm=None) -> bool:
+    """True when every vertex's nearest centreline point is its own ring (no self-intersection)."""
+    n = max(200, int(np.ceil(length / 0.5)))
+    u = np.linspace(0.0, 1.0, n + 1)
+    tree = cKDTree(centerline(u))
+    _, j = tree.query(vertices)
+    tol = (tol_mm if tol_mm is not None else 2.0 + 2 * length / n) / length
+    return bool(np.all(np.abs(u[j] - np.repeat(ring_s, n_phi)) <= tol))
+
+
+def _const_radius(r0):
+    def radius(s, phi):
+        return np.full(np.broadcast_shapes(np.shape(s), np.shape(phi)), float(r0))
+
+    return radius
+
+
+def _finish(kind, V, F, params, centerline, radius, frame) -> Phantom:
+    V = np.ascontiguousarray(V, dtype=float)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    params = {k: _plain(v) for k, v in params.items()}
+    params["n_vertices"] = int(len(V))
+    params["n_triangles"] = int(len(F))
+    return Phantom(
+        vertices=V,
+        faces=F,
+        kind=kind,
+        params=params,
+        inlet_center=np.asarray(centerline(np.array([0.0]))[0], float),
+        outlet_center=np.asarray(centerline(np.array([1.0]))[0], float),
+        centerline=centerline,
+        radius=radius,
+        frame=frame,
+    )
+
+
+def _plain(v):
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v)
+    if isinstance(v, str):
+        return v
+    raise TypeError(f"phantom parameter of type {type(v).__name__} is not JSON-serialisable")
+
+
+def _merge(defaults: dict, overrides: dict, kind: str) -> dict:
+    unknown = sorted(set(overrides) - set(defaults))
+    if unknown:
+        raise VCSInputError(
+            f"unknown {kind} phantom parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(defaults))}"
+        )
+    p = dict(defaults)
+    for k, v in overrides.items():
+        p[k] = type(defaults[k])(v)
+    return p
+
+
+def _s_array(s):
+    return np.asarray(s, float)
+
+
+def write_stl(phantom: Phantom, path) -> None:
+    """Binary STL (single solid, float32, outward facet normals) of ``phantom``'s open surface (mm)."""
+    header = f"vcs phantom kind={phantom.kind} seed={phantom.params.get('seed', 0)} units=mm"
+    write_stl_binary(path, np.asarray(phantom.vertices, float), np.asarray(phantom.faces), header)
