@@ -36,13 +36,16 @@ def _tube(h: float, **overrides) -> Phantom:
     return _circular(centerline, frame, L, r0, h, p)
 
 
-def _circular(centerline, frame, L: float, r0: float, h: float, p: dict):
-    """Mesh of a constant-radius tube of length L around ``centerline`` in ``frame`` (edges ~h)."""
+def _circular(centerline, frame, L: float, r0: float, h: float, p: dict, **derived):
+    """Mesh of a constant-radius tube of length L around ``centerline`` in ``frame`` (edges ~h).
+
+    ``p`` gains ``length_mm``, then ``derived`` (in order), then ``n_phi`` and ``n_s``.
+    """
     n_phi = _n_around(r0, h)
     ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
     _, v1, v2 = frame(ring)
     V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
-    p.update(length_mm=L, n_phi=n_phi, n_s=len(ring))
+    p.update(length_mm=L, **derived, n_phi=n_phi, n_s=len(ring))
     return V, F, p, centerline, _const_radius(r0), frame, ring
 
 
@@ -101,9 +104,4 @@ def _helix(h: float, **overrides) -> Phantom:
         v2 = ca * B - sa * N
         return t, v1, v2
 
-    n_phi = _n_around(r0, h)
-    ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
-    _, v1, v2 = frame(ring)
-    V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
-    p.update(length_mm=L, curvature_radius_mm=1 / kappa, torsion_per_mm=torsion, n_phi=n_phi, n_s=len(ring))
-    return V, F, p, centerline, _const_radius(r0), frame, ring
+    return _circular(centerline, frame, L, r0, h, p, curvature_radius_mm=1 / kappa, torsion_per_mm=torsion)
