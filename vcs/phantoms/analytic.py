@@ -1,65 +1,92 @@
 """Analytic phantoms with exact truth: straight tube, torus arc and helix (lengths in mm).
 
-Their centreline, rotation-minimising frame, radius and curvature are known in closed form, so
-tests can compare a VCS fit against analytic values.
+Their centreline, rotation-minimising frame, radius (constant) and curvature are known in closed
+form, so tests can compare a VCS fit against analytic values. Each is an open circular tube of
+constant radius meshed by the shared sweep (:mod:`vcs.phantoms.sweep`); build them with
+:func:`vcs.phantoms.make_phantom`.
 
-``tube``   straight circular tube along +z from the origin (radius 10, length 100).
-``torus``  arc of a torus in the xy-plane, centre circle radius 40 about the origin starting at
-           (40, 0, 0) and turning counter-clockwise by 180 deg, tube radius 8.
-``helix``  c = (a cos u, a sin u, b u), a = 20, pitch 2 pi b = 50, 1.5 turns, tube radius 5.
+``tube``   straight circular tube along +z from the origin (radius 10, length 100); curvature 0.
+``torus``  arc of a torus in the xy-plane, centre circle radius R = 40 about the origin starting
+           at (40, 0, 0) and turning counter-clockwise by 180 deg, tube radius 8; curvature 1/R.
+``helix``  c = (a cos u, a sin u, b u), a = 20, pitch 2 pi b = 50, 1.5 turns, tube radius 5;
+           curvature a / (a^2 + b^2), torsion b / (a^2 + b^2).
 """
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
-from vcs.phantoms.sweep import Phantom, _const_radius, _grid_mesh, _merge, _n_around, _s_array
+from vcs.phantoms.sweep import (
+    CenterlineFn,
+    FrameFn,
+    SweptSurface,
+    _const_radius,
+    _grid_mesh,
+    _merge,
+    _n_around,
+    _s_array,
+)
 
 __all__: list[str] = []
 
+_Frame = tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]
 
-def _tube(h: float, **overrides) -> Phantom:
+
+def _tube(h: float, **overrides: float) -> SweptSurface:
+    """Straight tube along +z from the origin: c(s) = (0, 0, L s), frame (e_z, e_x, e_y).
+
+    ``h``: target edge (mm); ``overrides``: ``radius_mm`` (10), ``length_mm`` (100).
+    """
     p = _merge({"radius_mm": 10.0, "length_mm": 100.0}, overrides, "tube")
     r0, L = p["radius_mm"], p["length_mm"]
     if r0 <= 0 or L <= 0:
         raise VCSInputError("tube phantom: radius_mm and length_mm must be positive")
     ez, ex, ey = np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]
 
-    def centerline(s):
+    def centerline(s: ArrayLike) -> NDArray[np.floating]:
         s = _s_array(s)
         return np.stack([0 * s, 0 * s, L * s], -1)
 
-    def frame(s):
-        n = np.shape(_s_array(s))
-        return tuple(np.broadcast_to(e, n + (3,)).copy() for e in (ez, ex, ey))
+    def frame(s: ArrayLike) -> _Frame:
+        shape = np.shape(_s_array(s)) + (3,)
+        return np.broadcast_to(ez, shape).copy(), np.broadcast_to(ex, shape).copy(), np.broadcast_to(ey, shape).copy()
 
     return _circular(centerline, frame, L, r0, h, p)
 
 
-def _circular(centerline, frame, L: float, r0: float, h: float, p: dict, **derived):
+def _circular(
+    centerline: CenterlineFn, frame: FrameFn, L: float, r0: float, h: float, p: dict, **derived: float
+) -> SweptSurface:
     """Mesh of a constant-radius tube of length L around ``centerline`` in ``frame`` (edges ~h).
 
-    ``p`` gains ``length_mm``, then ``derived`` (in order), then ``n_phi`` and ``n_s``.
+    ``L``, ``r0``, ``h`` in mm; rings equally spaced in s. ``p`` gains ``length_mm``, then
+    ``derived`` (in order), then ``n_phi`` and ``n_s``.
     """
     n_phi = _n_around(r0, h)
     ring = np.linspace(0.0, 1.0, max(2, int(np.ceil(L / h))) + 1)
     _, v1, v2 = frame(ring)
     V, F = _grid_mesh(centerline(ring), v1, v2, np.full((len(ring), n_phi), r0), 2 * np.pi * np.arange(n_phi) / n_phi)
     p.update(length_mm=L, **derived, n_phi=n_phi, n_s=len(ring))
-    return V, F, p, centerline, _const_radius(r0), frame, ring
+    return SweptSurface(V, F, p, centerline, _const_radius(r0), frame, ring)
 
 
-def _torus(h: float, **overrides) -> Phantom:
+def _torus(h: float, **overrides: float) -> SweptSurface:
+    """Torus arc in the xy-plane: c(s) = R (cos A s, sin A s, 0), v1 towards the axis, v2 = +z.
+
+    ``h``: target edge (mm); ``overrides``: ``major_radius_mm`` R (40), ``tube_radius_mm`` (8),
+    ``arc_angle_deg`` A (180).
+    """
     p = _merge({"major_radius_mm": 40.0, "tube_radius_mm": 8.0, "arc_angle_deg": 180.0}, overrides, "torus")
     R, r0, A = p["major_radius_mm"], p["tube_radius_mm"], np.deg2rad(p["arc_angle_deg"])
     if not (0 < r0 < R) or not (0 < A < 2 * np.pi):
         raise VCSInputError("torus phantom: need 0 < tube_radius_mm < major_radius_mm and 0 < arc_angle_deg < 360")
 
-    def centerline(s):
+    def centerline(s: ArrayLike) -> NDArray[np.floating]:
         a = A * _s_array(s)
         return np.stack([R * np.cos(a), R * np.sin(a), 0 * a], -1)
 
-    def frame(s):
+    def frame(s: ArrayLike) -> _Frame:
         a = A * _s_array(s)
         c, sn, z = np.cos(a), np.sin(a), 0 * a
         # t, v1 = principal normal (towards the torus axis), v2 = t x v1 = +z
@@ -68,7 +95,13 @@ def _torus(h: float, **overrides) -> Phantom:
     return _circular(centerline, frame, R * A, r0, h, p)
 
 
-def _helix(h: float, **overrides) -> Phantom:
+def _helix(h: float, **overrides: float) -> SweptSurface:
+    """Helix c(u) = (a cos u, a sin u, b u), u = 2 pi turns s, with its exact rotation-minimising frame.
+
+    ``h``: target edge (mm); ``overrides``: ``helix_radius_mm`` a (20), ``pitch_mm`` 2 pi b (50),
+    ``turns`` (1.5), ``tube_radius_mm`` (5). Adds ``curvature_radius_mm`` and ``torsion_per_mm``
+    to the parameters.
+    """
     p = _merge({"helix_radius_mm": 20.0, "pitch_mm": 50.0, "turns": 1.5, "tube_radius_mm": 5.0}, overrides, "helix")
     a, pitch, turns, r0 = p["helix_radius_mm"], p["pitch_mm"], p["turns"], p["tube_radius_mm"]
     if min(a, pitch, turns, r0) <= 0:
@@ -88,11 +121,11 @@ def _helix(h: float, **overrides) -> Phantom:
             f"helix phantom: successive turns overlap (pitch {pitch:g} mm <= {2.2 * r0 * w / a:.2f} mm); raise pitch_mm"
         )
 
-    def centerline(s):
+    def centerline(s: ArrayLike) -> NDArray[np.floating]:
         u = U * _s_array(s)
         return np.stack([a * np.cos(u), a * np.sin(u), b * u], -1)
 
-    def frame(s):
+    def frame(s: ArrayLike) -> _Frame:
         u = U * _s_array(s)
         c, sn = np.cos(u), np.sin(u)
         t = np.stack([-a * sn, a * c, np.full_like(u, b)], -1) / w

@@ -1,15 +1,21 @@
 """Seeded synthetic thoracic aorta (lengths in mm).
 
 Aortic root (three sinuses of Valsalva) -> ascending aorta (optional fusiform aneurysm) ->
-non-planar arch -> tapering descending aorta, drawn from a seeded random stream.
+non-planar arch -> tapering descending aorta. ``_aorta_sample`` draws the free parameters from a
+seeded random stream, ``_AortaGeometry`` turns them into an exact unit-speed centreline, its
+rotation-minimising frame and the wall radius, and ``_aorta`` redraws until the geometry passes
+the anatomical and self-intersection checks, then meshes it with the shared sweep
+(:mod:`vcs.phantoms.sweep`). Build one with ``vcs.phantoms.make_phantom("aorta", seed=...)``.
 """
 from __future__ import annotations
 
-
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
-from vcs.phantoms.sweep import _grid_mesh, _n_around, _reach_ok, _ring_s
+from vcs.phantoms.sweep import SweptSurface, _grid_mesh, _n_around, _reach_ok, _ring_s
+
+_Arr = NDArray[np.floating]
 
 __all__ = ["AORTA_EDGE_SCALE"]
 
@@ -23,27 +29,29 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 _GL_X = 0.5 * (_GL_X + 1.0)
 _GL_W = 0.5 * _GL_W
 
+
 # ----------------------------------------------------------------------------------------------
 # smooth primitives
 
 
-def _ss(x):
+def _ss(x: ArrayLike) -> _Arr:
     """C2 smooth step (quintic 'smootherstep'): 0 for x <= 0, 1 for x >= 1."""
     x = np.clip(x, 0.0, 1.0)
     return x * x * x * (x * (6 * x - 15) + 10)
 
 
-def _dss(x):
+def _dss(x: ArrayLike) -> _Arr:
+    """Derivative of :func:`_ss` (0 outside [0, 1])."""
     x = np.clip(x, 0.0, 1.0)
     return 30 * x * x * (1 - x) ** 2
 
 
-def _bump(x):
+def _bump(x: ArrayLike) -> _Arr:
     """C2 bump with support (-1, 1), 1 at 0."""
     return _ss(1.0 - np.abs(x))
 
 
-def _ramp_integral(x, e):
+def _ramp_integral(x: ArrayLike, e: float) -> _Arr:
     """int_0^x ss(v / e) dv."""
     x = np.asarray(x, float)
     u = np.clip(x / e, 0.0, 1.0)
@@ -54,22 +62,24 @@ def _ramp_integral(x, e):
 class _PlateauStep:
     """Monotone C2 step 0 -> 1 on [0, 1] whose slope is a plateau with smooth ramps e1, e2."""
 
-    def __init__(self, e1: float, e2: float):
+    def __init__(self, e1: float, e2: float) -> None:
         self.e1, self.e2 = e1, e2
         self.area = 1.0 - 0.5 * (e1 + e2)
 
-    def __call__(self, t):
+    def __call__(self, t: ArrayLike) -> _Arr:
+        """Step value at ``t`` (clipped to [0, 1])."""
         t = np.clip(t, 0.0, 1.0)
         a = _ramp_integral(t, self.e1) + _ramp_integral(1.0, self.e2) - _ramp_integral(1.0 - t, self.e2) - t
         return a / self.area
 
-    def deriv(self, t):
+    def deriv(self, t: _Arr) -> _Arr:
+        """Slope d step / dt (0 outside (0, 1))."""
         inside = (t > 0) & (t < 1)
         w = _ss(t / self.e1) + _ss((1.0 - t) / self.e2) - 1.0
         return np.where(inside, w, 0.0) / self.area
 
 
-def _b16(t):
+def _b16(t: _Arr) -> tuple[_Arr, _Arr]:
     """C1 bump 16 t^2 (1 - t)^2 on [0, 1] (0 outside) and its derivative."""
     inside = (t > 0) & (t < 1)
     tt = np.clip(t, 0.0, 1.0)
@@ -118,6 +128,10 @@ def _aorta_sample(rng: np.random.Generator) -> dict:
     return q
 
 
+# ----------------------------------------------------------------------------------------------
+# geometry
+
+
 class _AortaGeometry:
     """Unit-speed centreline from a heading (theta in the arch plane, beta out of it) and the wall.
 
@@ -129,7 +143,7 @@ class _AortaGeometry:
     8-point Gauss-Legendre from a 1 mm table, i.e. exact to round-off.
     """
 
-    def __init__(self, q: dict, widen: float = 1.0):
+    def __init__(self, q: dict, widen: float = 1.0) -> None:
         self.q = q
         d2r = np.deg2rad
         self.alpha = d2r(q["root_tilt_deg"])
@@ -177,8 +191,8 @@ class _AortaGeometry:
             self.an_amp = float(np.clip(amp, 0.0, cap))
         self._table()
 
-    # heading angles and their s-derivatives
-    def angles(self, s):
+    def angles(self, s: ArrayLike) -> tuple[_Arr, _Arr, _Arr, _Arr]:
+        """Heading angles theta, beta (rad) at arc length ``s`` (mm) and their s-derivatives (rad/mm)."""
         s = np.asarray(s, float)
         t_arch = (s - self.La) / self.ell
         th = -self.alpha + self.delta * _ss(s / self.La) + self.turn * self.step(t_arch)
@@ -197,14 +211,15 @@ class _AortaGeometry:
                 be, dbe = be + w, dbe + dw
         return th, dth, be, dbe
 
-    def _rates(self, s):
+    def _rates(self, s: ArrayLike) -> tuple[_Arr, _Arr]:
         """Integrands: c'(s) (n, 3) and psi'(s) (n,)."""
         th, dth, be, _ = self.angles(s)
         cb = np.cos(be)
         T = np.stack([cb * np.sin(th), np.sin(be), cb * np.cos(th)], -1)
         return T, -dth * np.sin(be)
 
-    def _table(self):
+    def _table(self) -> None:
+        """c and psi at every 1 mm (``self.st``, ``self.ct``, ``self.pt``) by 8-point Gauss-Legendre."""
         n = int(np.ceil(self.L / 1.0))
         self.ht = self.L / n
         self.st = np.linspace(0.0, self.L, n + 1)
@@ -215,7 +230,8 @@ class _AortaGeometry:
         self.ct = np.concatenate([np.zeros((1, 3)), np.cumsum(dc, axis=0)])
         self.pt = np.concatenate([[0.0], np.cumsum(dp)])
 
-    def _integrate(self, s):
+    def _integrate(self, s: ArrayLike) -> tuple[_Arr, _Arr]:
+        """c(s) (..., 3) mm and psi(s) (...) rad at arc length ``s`` (mm, clipped to [0, L])."""
         s = np.clip(np.asarray(s, float), 0.0, self.L)
         j = np.minimum((s / self.ht).astype(int), len(self.st) - 2)
         d = s - self.st[j]
@@ -225,10 +241,12 @@ class _AortaGeometry:
         psi = self.pt[j] + d * (dpsi.reshape(x.shape) @ _GL_W)
         return c, psi
 
-    def point(self, s):
+    def point(self, s: ArrayLike) -> _Arr:
+        """Centreline point(s) (..., 3) mm at arc length ``s`` (mm)."""
         return self._integrate(s)[0]
 
-    def frame_mm(self, s):
+    def frame_mm(self, s: ArrayLike) -> tuple[_Arr, _Arr, _Arr]:
+        """Rotation-minimising frame (t, v1, v2), each (..., 3), at arc length ``s`` (mm)."""
         s = np.asarray(s, float)
         _, psi = self._integrate(s)
         th, _, be, _ = self.angles(s)
@@ -239,11 +257,13 @@ class _AortaGeometry:
         v1 = np.cos(psi)[..., None] * Eth + np.sin(psi)[..., None] * Ebe
         return T, v1, np.cross(T, v1)
 
-    def curvature(self, s):
+    def curvature(self, s: ArrayLike) -> _Arr:
+        """Centreline curvature (1/mm) at arc length ``s`` (mm)."""
         _, dth, be, dbe = self.angles(s)
         return np.hypot(dth * np.cos(be), dbe)
 
-    def _base(self, s):
+    def _base(self, s: ArrayLike) -> _Arr:
+        """Axisymmetric radius (mm) at arc length ``s`` (mm): annulus -> ascending -> arch end -> outlet."""
         L = self.L
         return (
             self.R_ann
@@ -252,7 +272,8 @@ class _AortaGeometry:
             + (self.R_out - self.R_d0) * _ss((s - self.sd) / (L - self.sd))
         )
 
-    def radius_mm(self, s, phi):
+    def radius_mm(self, s: ArrayLike, phi: ArrayLike) -> _Arr:
+        """Wall radius (mm) at arc length ``s`` (mm) and angle ``phi`` (rad from v1), broadcast."""
         s, phi = np.broadcast_arrays(np.asarray(s, float), np.asarray(phi, float))
         lobes = (0.5 * (1 + np.cos(3 * (phi - self.phi_sin)))) ** self.lobe_p
         r = self._base(s) * (1 + self.sinus_bulge * _bump((s - self.s_mid) / self.s_half) * lobes)
@@ -271,7 +292,9 @@ class _AortaGeometry:
         gap = np.linalg.norm(c[a][:, None] - c[d][None], axis=-1) - 2 * np.maximum(rmax[a][:, None], rmax[d][None])
         return float(gap.min()) if gap.size else np.inf
 
-    def arch_measures(self):
+    def arch_measures(self) -> tuple[float, float]:
+        """Arch width (mm, ascending end to where the descending aorta is back at its height) and
+        height (mm, top of the arch above the end of the ascending aorta)."""
         s = np.linspace(0.0, self.L, int(self.L / 0.25) + 1)
         c = self.point(s)
         zA = float(c[np.searchsorted(s, self.La), 2])
@@ -282,7 +305,16 @@ class _AortaGeometry:
         return float(np.linalg.norm(B - A)), float(c[k_top, 2] - zA)
 
 
-def _aorta(h: float, seed: int, **overrides):
+# ----------------------------------------------------------------------------------------------
+# generator
+
+
+def _aorta(h: float, seed: int, **overrides: float | bool) -> SweptSurface:
+    """Seeded aorta meshed with edges of about ``h`` mm (up to 25 draws until every check passes).
+
+    ``overrides`` fix drawn parameters by name (see :func:`_aorta_sample`); derived measures
+    (diameters, arch size, clearance, ...) are added to the returned parameters.
+    """
     rng = np.random.default_rng(seed)
     allowed = set(_aorta_sample(np.random.default_rng(0)))
     unknown = sorted(set(overrides) - allowed)
@@ -316,7 +348,7 @@ def _aorta(h: float, seed: int, **overrides):
         phi = 2 * np.pi * np.arange(n_phi) / n_phi
         V, F = _grid_mesh(g.point(ring * L), v1, v2, g.radius_mm(ring[:, None] * L, phi[None, :]), phi)
 
-        def centerline(s, g=g):
+        def centerline(s: ArrayLike, g: _AortaGeometry = g) -> _Arr:
             return g.point(np.asarray(s, float) * g.L)
 
         if not _reach_ok(V, ring, n_phi, centerline, L):
@@ -327,10 +359,10 @@ def _aorta(h: float, seed: int, **overrides):
             f"aorta phantom: no valid geometry in 25 draws with overrides {overrides}; relax the overrides"
         )
 
-    def radius(s, phi, g=g):
+    def radius(s: ArrayLike, phi: ArrayLike, g: _AortaGeometry = g) -> _Arr:
         return g.radius_mm(np.asarray(s, float) * g.L, phi)
 
-    def frame(s, g=g):
+    def frame(s: ArrayLike, g: _AortaGeometry = g) -> tuple[_Arr, _Arr, _Arr]:
         return g.frame_mm(np.asarray(s, float) * g.L)
 
     width, height = g.arch_measures()
@@ -364,4 +396,4 @@ def _aorta(h: float, seed: int, **overrides):
         n_phi=n_phi,
         n_s=len(ring),
     )
-    return V, F, p, centerline, radius, frame, ring
+    return SweptSurface(V, F, p, centerline, radius, frame, ring)

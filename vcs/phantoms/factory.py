@@ -10,16 +10,36 @@ from vcs.phantoms.sweep import Phantom, _finish, _reach_ok
 
 __all__ = ["KINDS", "make_phantom"]
 
+#: Phantom kinds accepted by :func:`make_phantom`.
 KINDS = ("tube", "torus", "helix", "aorta")
 
 
-def make_phantom(kind: str, *, seed: int = 0, resolution: float = 1.0, **overrides) -> Phantom:
-    """Build a phantom of ``kind`` (tube, torus, helix, aorta); see the module docstring.
+def make_phantom(kind: str, *, seed: int = 0, resolution: float = 1.0, **overrides: float | bool) -> Phantom:
+    """Build a phantom of ``kind``: an open swept tube with its exact generating geometry (mm).
 
-    ``resolution`` is the target triangle edge (mm; quad sides, diagonals are sqrt(2) longer) for
-    the analytic kinds and ``AORTA_EDGE_SCALE * resolution`` for the aorta. ``seed`` only affects
-    the aorta. ``overrides`` set generator parameters by name (unknown names are an error); all
-    parameters, drawn or derived, are returned in ``Phantom.params``.
+    Parameters
+    ----------
+    kind : {"tube", "torus", "helix", "aorta"}
+        Analytic kinds: :mod:`vcs.phantoms.analytic`; the seeded aorta: :mod:`vcs.phantoms.aorta`.
+    seed : int
+        Random seed of the aorta (ignored by the analytic kinds, but recorded in ``params``).
+    resolution : float
+        Target triangle edge (mm; quad sides, diagonals are sqrt(2) longer) for the analytic kinds;
+        ``AORTA_EDGE_SCALE * resolution`` mm for the aorta.
+    **overrides
+        Generator parameters by name (unknown names are an error).
+
+    Returns
+    -------
+    Phantom
+        Vertices (n_s * n_phi, 3) mm, outward faces (2 (n_s - 1) n_phi, 3), the exact centreline,
+        frame and radius, and every parameter (given, drawn or derived) in ``params``.
+
+    Raises
+    ------
+    VCSInputError
+        Unknown kind or parameter, non-positive resolution, or parameters giving a
+        self-intersecting (or, for the aorta, anatomically out-of-range) surface.
     """
     if kind not in KINDS:
         raise VCSInputError(f"unknown phantom kind '{kind}'; choose one of {', '.join(KINDS)}")

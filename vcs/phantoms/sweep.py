@@ -10,51 +10,116 @@ triangles, oriented so that their normals point out of the lumen. The two ends a
 (two boundary loops; the loop at s = 0 is the inlet). Vertices are stored ring by ring
 (``params["n_s"]`` rings of ``params["n_phi"]`` vertices, phi_j = 2 pi j / n_phi).
 
-This module holds the :class:`Phantom` record, the ring -> triangle meshing, ring spacing, the
-reach (self-intersection) check, the parameter helpers and the STL writer (through
-:func:`vcs.mesh.write_stl_binary`).
+This module holds the :class:`Phantom` record, what a kind's generator hands back
+(:class:`SweptSurface`), the rings -> triangles meshing (:func:`sweep_tube` for any polyline),
+ring spacing, the reach (self-intersection) check, the parameter helpers and the STL writer
+(through :func:`vcs.mesh.write_stl_binary`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from pathlib import Path
+from typing import Callable, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
 from vcs.frame import rotation_minimizing_frame
 from vcs.mesh import write_stl_binary
 
-__all__ = ["Phantom", "sweep_tube", "write_stl"]
+__all__ = ["CenterlineFn", "FrameFn", "Phantom", "RadiusFn", "SweptSurface", "sweep_tube", "write_stl"]
+
+#: ``centerline(s)``: s (...) in [0, 1] -> points (..., 3) in mm.
+CenterlineFn = Callable[[ArrayLike], NDArray[np.floating]]
+#: ``radius(s, phi)``: s in [0, 1] and phi in rad, broadcast together -> wall radius in mm.
+RadiusFn = Callable[[ArrayLike, ArrayLike], NDArray[np.floating]]
+#: ``frame(s)``: s (...) in [0, 1] -> unit vectors ``(t, v1, v2)``, each (..., 3).
+FrameFn = Callable[[ArrayLike], tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]]
 
 
 @dataclass(frozen=True)
 class Phantom:
-    """A synthetic vessel surface with its exact generating geometry.
+    """A synthetic vessel surface with its exact generating geometry (mm).
 
-    ``centerline(s)`` and ``radius(s, phi)`` take s in [0, 1] (proportional to arc length);
-    ``frame(s)`` returns the generator's rotation-minimising frame ``(t, v1, v2)``, each (n, 3),
-    in which ``phi`` is measured (phi = 0 along v1, pi/2 along v2 = t x v1).
+    Attributes
+    ----------
+    vertices : (n_s * n_phi, 3) float
+        Surface vertices (mm), ring by ring from the inlet.
+    faces : (2 (n_s - 1) n_phi, 3) int64
+        Triangles, outward normals; both ends open.
+    kind : str
+        ``"tube"``, ``"torus"``, ``"helix"`` or ``"aorta"``.
+    params : dict
+        Every generator parameter, given, drawn or derived (JSON-serialisable scalars), with
+        ``n_s``, ``n_phi``, ``n_vertices`` and ``n_triangles``.
+    inlet_center, outlet_center : (3,) float
+        ``centerline(0)`` and ``centerline(1)`` (mm).
+    centerline : callable
+        ``centerline(s)``: s (...) in [0, 1], proportional to arc length -> (..., 3) points (mm).
+    radius : callable
+        ``radius(s, phi)``: wall distance (mm) from ``centerline(s)`` at angle phi (rad),
+        broadcasting s against phi.
+    frame : callable or None
+        ``frame(s)`` -> ``(t, v1, v2)``, each (..., 3): the generator's rotation-minimising frame,
+        in which phi is measured (phi = 0 along v1, pi/2 along v2 = t x v1).
     """
 
-    vertices: np.ndarray
-    faces: np.ndarray
+    vertices: NDArray[np.floating]
+    faces: NDArray[np.integer]
     kind: str
     params: dict
-    inlet_center: np.ndarray
-    outlet_center: np.ndarray
-    centerline: Callable[[np.ndarray], np.ndarray]
-    radius: Callable[[np.ndarray, np.ndarray], np.ndarray]
-    frame: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+    inlet_center: NDArray[np.floating]
+    outlet_center: NDArray[np.floating]
+    centerline: CenterlineFn
+    radius: RadiusFn
+    frame: FrameFn | None = None
+
+
+class SweptSurface(NamedTuple):
+    """What a phantom kind's generator returns, before :func:`_finish` makes it a :class:`Phantom`.
+
+    Attributes
+    ----------
+    vertices : (n_s * n_phi, 3) float
+        Ring-by-ring grid vertices (mm).
+    faces : (2 (n_s - 1) n_phi, 3) int64
+        Outward triangles.
+    params : dict
+        Generator parameters (given, drawn and derived), including ``length_mm``, ``n_phi`` and
+        ``n_s``.
+    centerline : callable
+        ``centerline(s)``, s in [0, 1] -> (..., 3) mm.
+    radius : callable
+        ``radius(s, phi)`` -> mm.
+    frame : callable
+        ``frame(s)`` -> ``(t, v1, v2)``, each (..., 3).
+    ring_s : (n_s,) float
+        s of each ring, increasing from 0 to 1.
+    """
+
+    vertices: NDArray[np.floating]
+    faces: NDArray[np.integer]
+    params: dict
+    centerline: CenterlineFn
+    radius: RadiusFn
+    frame: FrameFn
+    ring_s: NDArray[np.floating]
 
 
 # ----------------------------------------------------------------------------------------------
 # generic sweep
 
 
-def _grid_mesh(centers, v1, v2, r, phi):
-    """Vertices/faces of the (s, phi) grid; outward when v2 = t x v1 and s runs along t."""
+def _grid_mesh(
+    centers: ArrayLike, v1: ArrayLike, v2: ArrayLike, r: NDArray[np.floating], phi: NDArray[np.floating]
+) -> tuple[NDArray[np.floating], NDArray[np.int64]]:
+    """Vertices/faces of the (s, phi) grid; outward when v2 = t x v1 and s runs along t.
+
+    ``centers``, ``v1``, ``v2``: (n_s, 3); ``r``: (n_s, n_phi) mm; ``phi``: (n_phi,) rad.
+    Returns vertices (n_s * n_phi, 3) and faces (2 (n_s - 1) n_phi, 3) int64.
+    """
     centers, v1, v2 = (np.asarray(a, float) for a in (centers, v1, v2))
     n_s, n_phi = r.shape
     d = np.cos(phi)[None, :, None] * v1[:, None, :] + np.sin(phi)[None, :, None] * v2[:, None, :]
@@ -67,30 +132,31 @@ def _grid_mesh(centers, v1, v2, r, phi):
     return V, F.astype(np.int64)
 
 
-def _least_aligned_normal(t):
+def _least_aligned_normal(t: NDArray[np.floating]) -> NDArray[np.floating]:
+    """Unit vector normal to the unit vector ``t`` (3,): the coordinate axis least aligned with it."""
     axis = np.eye(3)[int(np.argmin(np.abs(t)))]
     p = axis - (axis @ t) * t
     return p / np.linalg.norm(p)
 
 
 def sweep_tube(
-    centerline_pts,
-    radius_fn,
+    centerline_pts: ArrayLike,
+    radius_fn: float | RadiusFn,
     *,
     n_phi: int | None = None,
     edge: float = 1.0,
-    tangents=None,
-    v1_0=None,
-    frames=None,
-):
+    tangents: ArrayLike | None = None,
+    v1_0: ArrayLike | None = None,
+    frames: tuple[ArrayLike, ArrayLike] | None = None,
+) -> tuple[NDArray[np.floating], NDArray[np.int64]]:
     """Open tube around a polyline: one ring of ``n_phi`` vertices per centreline point.
 
     Parameters
     ----------
     centerline_pts : (n, 3) float, n >= 2
-        Ring centres, in order from the inlet (s = 0) to the outlet (s = 1).
+        Ring centres (mm), in order from the inlet (s = 0) to the outlet (s = 1).
     radius_fn : float or callable ``(s, phi) -> r``
-        Lumen radius; ``s`` is the normalised cumulative polyline length, broadcast as an
+        Lumen radius (mm); ``s`` is the normalised cumulative polyline length, broadcast as an
         (n, 1) column against phi as a (1, n_phi) row. Must be positive (star-shaped sections).
     n_phi : int, optional
         Vertices per ring. Default: ``ceil(2 pi r_max / edge)`` (at least 8), r_max taken from
@@ -107,7 +173,15 @@ def sweep_tube(
 
     Returns
     -------
-    vertices (n * n_phi, 3) float, faces (2 (n - 1) n_phi, 3) int64: outward normals, open ends.
+    vertices : (n * n_phi, 3) float
+        Ring by ring (mm), phi_j = 2 pi j / n_phi from v1 towards v2.
+    faces : (2 (n - 1) n_phi, 3) int64
+        Outward normals (flipped if the frame is left-handed), open ends.
+
+    Raises
+    ------
+    VCSInputError
+        Fewer than two points, repeated consecutive points or a non-positive radius.
     """
     P = np.asarray(centerline_pts, float)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) < 2:
@@ -158,11 +232,17 @@ def sweep_tube(
 
 
 def _n_around(r: float, h: float) -> int:
+    """Vertices per ring for edges of about ``h`` mm around a circle of radius ``r`` mm (>= 12)."""
     return max(12, int(np.ceil(2 * np.pi * r / h)))
 
 
-def _ring_s(length: float, mean_r: Callable[[np.ndarray], np.ndarray], n_phi: int) -> np.ndarray:
-    """Ring parameters in [0, 1] with axial spacing equal to the local circumferential edge."""
+def _ring_s(
+    length: float, mean_r: Callable[[NDArray[np.floating]], NDArray[np.floating]], n_phi: int
+) -> NDArray[np.floating]:
+    """Ring parameters (n_s,) in [0, 1] with axial spacing equal to the local circumferential edge.
+
+    ``length``: centreline length (mm); ``mean_r(s)``: mean radius (mm) of the section at s.
+    """
     u = np.linspace(0.0, 1.0, 4001)
     dens = n_phi / (2 * np.pi * mean_r(u)) * length  # rings per unit s
     cum = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(u))])
@@ -172,8 +252,19 @@ def _ring_s(length: float, mean_r: Callable[[np.ndarray], np.ndarray], n_phi: in
     return s
 
 
-def _reach_ok(vertices, ring_s, n_phi, centerline, length, tol_mm=None) -> bool:
-    """True when every vertex's nearest centreline point is its own ring (no self-intersection)."""
+def _reach_ok(
+    vertices: NDArray[np.floating],
+    ring_s: NDArray[np.floating],
+    n_phi: int,
+    centerline: CenterlineFn,
+    length: float,
+    tol_mm: float | None = None,
+) -> bool:
+    """True when every vertex's nearest centreline point is its own ring (no self-intersection).
+
+    ``vertices`` (n_s * n_phi, 3) mm, ring by ring at ``ring_s`` (n_s,); ``length`` (mm) of the
+    centreline; ``tol_mm`` the allowed axial mismatch (default 2 mm plus two probe steps).
+    """
     n = max(200, int(np.ceil(length / 0.5)))
     u = np.linspace(0.0, 1.0, n + 1)
     tree = cKDTree(centerline(u))
@@ -182,14 +273,25 @@ def _reach_ok(vertices, ring_s, n_phi, centerline, length, tol_mm=None) -> bool:
     return bool(np.all(np.abs(u[j] - np.repeat(ring_s, n_phi)) <= tol))
 
 
-def _const_radius(r0):
-    def radius(s, phi):
+def _const_radius(r0: float) -> RadiusFn:
+    """``radius(s, phi)`` equal to ``r0`` mm everywhere (shape of s and phi broadcast)."""
+
+    def radius(s: ArrayLike, phi: ArrayLike) -> NDArray[np.floating]:
         return np.full(np.broadcast_shapes(np.shape(s), np.shape(phi)), float(r0))
 
     return radius
 
 
-def _finish(kind, V, F, params, centerline, radius, frame) -> Phantom:
+def _finish(
+    kind: str,
+    V: ArrayLike,
+    F: ArrayLike,
+    params: dict,
+    centerline: CenterlineFn,
+    radius: RadiusFn,
+    frame: FrameFn | None,
+) -> Phantom:
+    """The :class:`Phantom` of a meshed surface: contiguous arrays, plain-typed params with counts."""
     V = np.ascontiguousarray(V, dtype=float)
     F = np.ascontiguousarray(F, dtype=np.int64)
     params = {k: _plain(v) for k, v in params.items()}
@@ -208,7 +310,8 @@ def _finish(kind, V, F, params, centerline, radius, frame) -> Phantom:
     )
 
 
-def _plain(v):
+def _plain(v: object) -> bool | int | float | str:
+    """``v`` as a plain Python scalar (numpy scalars converted); TypeError for anything else."""
     if isinstance(v, (bool, np.bool_)):
         return bool(v)
     if isinstance(v, (int, np.integer)):
@@ -221,6 +324,7 @@ def _plain(v):
 
 
 def _merge(defaults: dict, overrides: dict, kind: str) -> dict:
+    """``defaults`` updated by ``overrides`` (cast to the default's type); unknown names are an error."""
     unknown = sorted(set(overrides) - set(defaults))
     if unknown:
         raise VCSInputError(
@@ -232,11 +336,20 @@ def _merge(defaults: dict, overrides: dict, kind: str) -> dict:
     return p
 
 
-def _s_array(s):
+def _s_array(s: ArrayLike) -> NDArray[np.floating]:
+    """``s`` as a float array."""
     return np.asarray(s, float)
 
 
-def write_stl(phantom: Phantom, path) -> None:
-    """Binary STL (single solid, float32, outward facet normals) of ``phantom``'s open surface (mm)."""
+def write_stl(phantom: Phantom, path: str | Path) -> None:
+    """Binary STL (single solid, float32, outward facet normals) of ``phantom``'s open surface (mm).
+
+    Parameters
+    ----------
+    phantom : Phantom
+        Surface to write (vertices in mm).
+    path : str or Path
+        Output file; the 80-byte header reads ``vcs phantom kind=<kind> seed=<seed> units=mm``.
+    """
     header = f"vcs phantom kind={phantom.kind} seed={phantom.params.get('seed', 0)} units=mm"
     write_stl_binary(path, np.asarray(phantom.vertices, float), np.asarray(phantom.faces), header)
