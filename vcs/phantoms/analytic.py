@@ -10,13 +10,19 @@ constant radius meshed by the shared sweep (:mod:`vcs.phantoms.sweep`); build th
            at (40, 0, 0) and turning counter-clockwise by 180 deg, tube radius 8; curvature 1/R.
 ``helix``  c = (a cos u, a sin u, b u), a = 20, pitch 2 pi b = 50, 1.5 turns, tube radius 5;
            curvature a / (a^2 + b^2), torsion b / (a^2 + b^2).
+
+:func:`write_closed_tube_stl` writes a closed straight tube (lengths in metres) as a multi-solid
+ASCII STL ``wall``/``inlet``/``outlet`` for OpenFOAM tests against the Hagen-Poiseuille solution.
 """
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
+from vcs.mesh import write_stl_ascii
 from vcs.phantoms.sweep import (
     CenterlineFn,
     FrameFn,
@@ -28,7 +34,7 @@ from vcs.phantoms.sweep import (
     _s_array,
 )
 
-__all__: list[str] = []
+__all__ = ["write_closed_tube_stl"]
 
 _Frame = tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]
 
@@ -138,3 +144,100 @@ def _helix(h: float, **overrides: float) -> SweptSurface:
         return t, v1, v2
 
     return _circular(centerline, frame, L, r0, h, p, curvature_radius_mm=1 / kappa, torsion_per_mm=torsion)
+
+
+# ----------------------------------------------------------------------------------------------
+# closed tube for OpenFOAM (metres)
+
+
+def _axis_frame(axis: ArrayLike) -> NDArray[np.floating]:
+    """(3, 3) rotation whose columns are e1, e2 and the unit ``axis`` (right-handed, e2 = axis x e1)."""
+    a = np.asarray(axis, float)
+    n = np.linalg.norm(a)
+    if a.shape != (3,) or not np.isfinite(n) or n == 0:
+        raise VCSInputError(f"closed tube: axis must be a non-zero 3-vector, got {axis!r}")
+    a = a / n
+    t = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(a, t)
+    e1 /= np.linalg.norm(e1)
+    return np.stack([e1, np.cross(a, e1), a], 1)
+
+
+def write_closed_tube_stl(
+    path: str | Path,
+    radius: float = 0.01,
+    length: float = 0.2,
+    n_theta: int = 96,
+    n_z: int = 80,
+    origin: ArrayLike = (0.0, 0.0, 0.0),
+    axis: ArrayLike = (0.0, 0.0, 1.0),
+) -> Path:
+    """Closed straight circular tube as a multi-solid ASCII STL (metres), for Hagen-Poiseuille tests.
+
+    The wall is ``n_z`` rings of ``n_theta`` quads (two triangles each) from ``origin`` along
+    ``axis``; the inlet disc (at ``origin``) and the outlet disc (at ``origin + length * axis``)
+    are fans of ``n_theta`` triangles around their centres. All normals point out of the lumen:
+    the wall radially outward, the inlet towards -axis, the outlet towards +axis. Merged, the
+    three solids form a closed, consistently wound surface enclosing the regular-polygon prism of
+    volume ``n_theta / 2 * radius**2 * sin(2 pi / n_theta) * length``. A slightly tilted axis
+    avoids axis-aligned flow, whose round-off transverse components keep OpenFOAM's normalised
+    Ux/Uy residuals from dropping below ~1e-4.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output ASCII STL.
+    radius : float
+        Tube radius (m), > 0.
+    length : float
+        Tube length (m), > 0.
+    n_theta : int
+        Vertices around each ring (>= 3); vertex j at angle 2 pi j / n_theta from e1 towards e2.
+    n_z : int
+        Axial wall segments (>= 1), equally spaced.
+    origin : (3,) float
+        Inlet centre (m).
+    axis : (3,) float
+        Tube direction (normalised here). The section frame is e1 = axis x x_hat (axis x y_hat
+        when |axis_x| >= 0.9, normalised), e2 = axis x e1.
+
+    Returns
+    -------
+    Path
+        ``path``, holding the solids ``wall`` (2 n_z n_theta triangles), ``inlet`` and ``outlet``
+        (n_theta triangles each), in that order.
+
+    Raises
+    ------
+    VCSInputError
+        Non-positive radius or length, n_theta < 3, n_z < 1 or a zero axis.
+    """
+    path = Path(path)
+    if not (radius > 0 and length > 0) or int(n_theta) < 3 or int(n_z) < 1:
+        raise VCSInputError(
+            f"closed tube: need radius > 0, length > 0, n_theta >= 3 and n_z >= 1 "
+            f"(got {radius}, {length}, {n_theta}, {n_z})"
+        )
+    n_theta, n_z = int(n_theta), int(n_z)
+    o = np.asarray(origin, float).reshape(3)
+    rot = _axis_frame(axis)
+    th = np.linspace(0.0, 2 * np.pi, n_theta, endpoint=False)
+    zs = np.linspace(0.0, length, n_z + 1)
+    # local coordinates (e1, e2, axis): rings k = 0..n_z, then the inlet and outlet centres
+    local = np.empty(((n_z + 1) * n_theta + 2, 3))
+    local[:-2, 0] = np.tile(radius * np.cos(th), n_z + 1)
+    local[:-2, 1] = np.tile(radius * np.sin(th), n_z + 1)
+    local[:-2, 2] = np.repeat(zs, n_theta)
+    local[-2:] = [[0.0, 0.0, 0.0], [0.0, 0.0, length]]
+    vertices = o + local @ rot.T
+    ring = np.arange((n_z + 1) * n_theta).reshape(n_z + 1, n_theta)
+    lo, hi = ring[:-1], ring[1:]
+    lo_next, hi_next = np.roll(lo, -1, axis=1), np.roll(hi, -1, axis=1)
+    # per quad (ring k, angle i): (lo_i, lo_i+1, hi_i+1) and (lo_i, hi_i+1, hi_i); normal e_theta x axis = +e_r
+    wall = np.stack([np.stack([lo, lo_next, hi_next], -1), np.stack([lo, hi_next, hi], -1)], axis=2).reshape(-1, 3)
+    c_in, c_out = len(vertices) - 2, len(vertices) - 1
+    first, last = ring[0], ring[-1]
+    inlet = np.stack([np.full(n_theta, c_in), np.roll(first, -1), first], -1)  # clockwise seen from +axis: -axis
+    outlet = np.stack([np.full(n_theta, c_out), last, np.roll(last, -1)], -1)  # counter-clockwise: +axis
+    write_stl_ascii(path, {"wall": vertices[wall], "inlet": vertices[inlet], "outlet": vertices[outlet]})
+    return path
