@@ -165,7 +165,11 @@ class _AortaGeometry:
         self.Ld = max(50.0, q["target_length_mm"] - self.sd)
         self.L = self.sd + self.Ld
         self.wob = (d2r(q["descending_wobble_deg"]), q["descending_wobble_wavelength_mm"])
-        self.twi = (d2r(q["descending_twist_deg"]), q["descending_twist_wavelength_mm"], d2r(q["descending_twist_phase_deg"]))
+        self.twi = (
+            d2r(q["descending_twist_deg"]),
+            q["descending_twist_wavelength_mm"],
+            d2r(q["descending_twist_phase_deg"]),
+        )
         # root, sinuses, aneurysm
         L = self.L
         self.s1, self.s2 = q["sinus_tau_start"] * L, q["sinus_tau_end"] * L
@@ -299,7 +303,7 @@ class _AortaGeometry:
         c = self.point(s)
         zA = float(c[np.searchsorted(s, self.La), 2])
         k_top = int(np.argmax(c[:, 2]))
-        below = np.nonzero((c[k_top:, 2] <= zA))[0]
+        below = np.nonzero(c[k_top:, 2] <= zA)[0]
         B = c[k_top + below[0]] if len(below) else c[-1]
         A = c[np.searchsorted(s, self.La)]
         return float(np.linalg.norm(B - A)), float(c[k_top, 2] - zA)
@@ -322,7 +326,7 @@ def _aorta(h: float, seed: int, **overrides: float | bool) -> SweptSurface:
         raise VCSInputError(
             f"unknown aorta phantom parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}"
         )
-    for attempt in range(25):
+    for attempt in range(25):  # noqa: B007 (read after the loop: n_rejected)
         q = _aorta_sample(rng)
         for k, v in overrides.items():
             q[k] = bool(v) if isinstance(q[k], bool) else float(v)
@@ -343,7 +347,7 @@ def _aorta(h: float, seed: int, **overrides: float | bool) -> SweptSurface:
             continue
         mean_r = rr.mean(axis=1)
         n_phi = _n_around(float(mean_r.mean()), h)
-        ring = _ring_s(L, lambda u: np.interp(u * L, sp, mean_r), n_phi)
+        ring = _ring_s(L, lambda u: np.interp(u * L, sp, mean_r), n_phi)  # noqa: B023 (called here)
         _, v1, v2 = g.frame_mm(ring * L)
         phi = 2 * np.pi * np.arange(n_phi) / n_phi
         V, F = _grid_mesh(g.point(ring * L), v1, v2, g.radius_mm(ring[:, None] * L, phi[None, :]), phi)

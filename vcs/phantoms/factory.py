@@ -51,7 +51,8 @@ def make_phantom(kind: str, *, seed: int = 0, resolution: float = 1.0, **overrid
         V, F, p, centerline, radius, frame, ring = _aorta(h, int(seed), **overrides)
     else:
         h = resolution
-        V, F, p, centerline, radius, frame, ring = {"tube": _tube, "torus": _torus, "helix": _helix}[kind](h, **overrides)
+        build = {"tube": _tube, "torus": _torus, "helix": _helix}[kind]
+        V, F, p, centerline, radius, frame, ring = build(h, **overrides)
         if kind != "tube" and not _reach_ok(V, ring, p["n_phi"], centerline, p["length_mm"]):
             raise VCSInputError(f"{kind} phantom self-intersects with parameters {overrides}; change them")
     params = {"kind": kind, "seed": int(seed), "resolution": resolution, "edge_mm": h, **p}
