@@ -36,7 +36,7 @@ def cases():
             "inlet_cap": d / "inlet.stl", "outlet_cap": d / "outlet4.stl"}
         yield "SimVascular segment", read_surface(DATA / "simvascular_aorta_segment_open.vtp"), {}
     try:
-        from vcs.phantom import make_phantom
+        from vcs.phantoms import make_phantom
 
         ph = make_phantom("aorta", seed=0, resolution=1.0)
         yield "aorta phantom (seed 0)", Surface(ph.vertices, ph.faces, {}, "mm", "given", "phantom"), {}

@@ -12,8 +12,9 @@ from vcs.ends import Ends, find_ends
 from vcs.errors import VCSInputError
 from vcs.io import Surface, read_surface
 from vcs.model import VesselCoordinateSystem
-from vcs.phantom import Phantom, make_phantom
 from vcs.grid import MeasurementGrid, measurement_grid
+from vcs.phantoms.factory import make_phantom
+from vcs.phantoms.sweep import Phantom
 from vcs.surface import WallMesh, wall_mesh
 from vcs.vessel import VesselModel, fit_vessel
 from vcs.wall import WallFit, WallModel, fit_wall

@@ -181,11 +181,11 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
     assert mask.shape == atlas.field_shapes["U"][:-1] and 0.15 < mask.mean() < 0.5
 
 
-# ------------------------------------------------------------------ phantom cohort (vcs.phantom)
+# ------------------------------------------------------------------ phantom cohort (vcs.phantoms)
 @pytest.fixture(scope="module")
 def aorta_cohort():
     """8 seeded aorta phantoms (coarse, no aneurysm) fitted with the default L, K, R (~25 s)."""
-    phantom = pytest.importorskip("vcs.phantom", reason="vcs.phantom (colleague's module) not available")
+    phantom = pytest.importorskip("vcs.phantoms", reason="vcs.phantoms not available")
     from vcs.io import Surface
     from vcs.vessel import fit_vessel
 

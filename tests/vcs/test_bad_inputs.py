@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from vcs.phantom import make_phantom, sweep_tube
+from vcs.phantoms import make_phantom, sweep_tube
 
 
 def fit(mesh, out, *args):

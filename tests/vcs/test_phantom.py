@@ -1,4 +1,4 @@
-"""Synthetic phantoms (vcs.phantom) against independent truth.
+"""Synthetic phantoms (vcs.phantoms) against independent truth.
 
 Truth used here never comes from the generator's own geometry code: analytic distances (z-axis,
 torus centre circle, the conftest Helix), polygon-prism volumes, a from-scratch edge/loop
@@ -14,7 +14,8 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
-from vcs.phantom import KINDS, Phantom, make_phantom, sweep_tube, write_stl
+from vcs.mesh import read_stl_solids, signed_volume
+from vcs.phantoms import KINDS, Phantom, make_phantom, sweep_tube, write_closed_tube_stl, write_stl
 
 
 @pytest.fixture(scope="module")
@@ -377,3 +378,49 @@ def test_write_stl_round_trip(phantoms, kind, tmp_path):
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     assert np.min(np.sum(rec["n"] * n, axis=1)) > 0.9999
+
+
+@pytest.mark.parametrize("axis", [(0.0, 0.0, 1.0), (0.03, 0.02, 1.0), (1.0, 0.5, -0.2)])
+def test_closed_tube_stl_is_closed_outward_and_exact(tmp_path, axis):
+    """OpenFOAM's Hagen-Poiseuille tube (metres): solids, closure, orientation, volume, inlet area."""
+    r, L, n = 0.01, 0.2, 96
+    o = np.array([0.05, -0.02, 0.1])
+    a = np.asarray(axis) / np.linalg.norm(axis)
+    path = write_closed_tube_stl(tmp_path / "tube.stl", radius=r, length=L, n_theta=n, n_z=40, origin=o, axis=axis)
+    solids = read_stl_solids(path)
+    assert list(solids) == ["wall", "inlet", "outlet"]
+    assert [len(solids[k]) for k in solids] == [2 * 40 * n, n, n]
+    # merge the solids and their duplicate vertices: every edge is used twice, once each way
+    V, inv = np.unique(np.concatenate(list(solids.values())).reshape(-1, 3), axis=0, return_inverse=True)
+    F = inv.reshape(-1, 3)
+    assert len(V) == 41 * n + 2
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    _, count = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    assert np.all(count == 2)
+    assert len(np.unique(directed, axis=0)) == len(directed)  # consistent winding
+    vol = signed_volume(V, F)
+    assert vol > 0 and abs(vol / (np.pi * r**2 * L) - 1) < 0.01
+    polygon = 0.5 * n * r**2 * np.sin(2 * np.pi / n)
+    assert abs(vol / (polygon * L) - 1) < 1e-6
+
+    def area_vector(tri):
+        return 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+
+    inlet, outlet, wall = (area_vector(solids[k]) for k in ("inlet", "outlet", "wall"))
+    assert abs(np.linalg.norm(inlet, axis=1).sum() / polygon - 1) < 1e-3
+    np.testing.assert_allclose(inlet.sum(0), -polygon * a, atol=1e-6 * polygon)  # faces -axis
+    np.testing.assert_allclose(outlet.sum(0), polygon * a, atol=1e-6 * polygon)  # faces +axis
+    # caps at the ends, wall at the radius with radially outward normals
+    np.testing.assert_allclose(solids["inlet"].reshape(-1, 3) @ a, o @ a, atol=1e-9)
+    np.testing.assert_allclose(solids["outlet"].reshape(-1, 3) @ a, o @ a + L, atol=1e-9)
+    c = solids["wall"].mean(axis=1)
+    radial = (c - o) - np.outer((c - o) @ a, a)
+    assert np.all(np.sum(wall * radial, axis=1) > 0)
+    w = solids["wall"].reshape(-1, 3) - o
+    np.testing.assert_allclose(np.linalg.norm(w - np.outer(w @ a, a), axis=1), r, rtol=1e-8)
+
+
+def test_closed_tube_stl_rejects_bad_arguments(tmp_path):
+    for kw in ({"radius": 0.0}, {"length": -1.0}, {"n_theta": 2}, {"n_z": 0}, {"axis": (0.0, 0.0, 0.0)}):
+        with pytest.raises(VCSInputError):
+            write_closed_tube_stl(tmp_path / "bad.stl", **kw)

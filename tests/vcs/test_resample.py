@@ -9,8 +9,8 @@ from scipy.interpolate import BSpline
 
 from vcs.centerline import uniform_knots
 from vcs.model import VesselCoordinateSystem
-from vcs.cfd.resample import (grid_to_vtk, load_fields, local_frame, grid_axes, sample_mesh, to_vcs_components,
-                          from_vcs_components, write_fields)
+from vcs.cfd.resample import load_fields, sample_mesh, write_fields
+from vcs.grid import from_vcs_components, grid_axes, grid_to_vtk, local_frame, measurement_grid, to_vcs_components
 from vcs.vessel import VesselModel
 from vcs.wall import WallModel
 
@@ -79,6 +79,24 @@ def test_grid_and_frame_components_round_trip():
     v = np.random.default_rng(0).normal(size=(5, 8, 3, 3))
     np.testing.assert_allclose(from_vcs_components(to_vcs_components(v, F), F), v, atol=1e-12)
     np.testing.assert_allclose(F[..., 0, :], np.broadcast_to(AXIS, (5, 8, 3)), atol=1e-12)
+
+
+def test_vcs_grid_and_fields_npz_share_one_grid(tube_mesh):
+    """`vcs grid` (measurement_grid) and the resampling (fields.npz) give the same nodes for the same
+    numbers: n_tau x n_theta x n_rho nodes, tau/theta/rho_n from one definition, same points."""
+    vol, wall, _ = tube_mesh
+    m = straight_model()
+    f = sample_mesh(vol, {"wall": wall}, m, n_tau=7, n_theta=8, n_rho=4)
+    g = measurement_grid(m, n_tau=7, n_theta=8, n_rho=4)
+    assert f["points"].shape == (7, 8, 4, 3) and g.points.shape == (7 * 8 * 4, 3)
+    np.testing.assert_array_equal(g.points * f["rho_scale"], f["points"].reshape(-1, 3))
+    T, TH, RN = np.meshgrid(f["tau"], f["theta"], f["rho_n"], indexing="ij")
+    np.testing.assert_array_equal(g.tau, T.ravel())
+    np.testing.assert_array_equal(g.theta, TH.ravel())
+    np.testing.assert_array_equal(g.rho_n, RN.ravel())
+    # analytic truth on the straight tube: rho = rho_n * R around the axis
+    r = np.linalg.norm(np.cross(g.points, AXIS), axis=1)
+    np.testing.assert_allclose(r, g.rho_n * RADIUS_MM, atol=1e-6)
 
 
 def check_poiseuille(f, tau_w, *, inner=(0.1, 0.9)):

@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from vcs.io import Surface
-from vcs.phantom import make_phantom, write_stl
+from vcs.phantoms import make_phantom, write_stl
 from vcs.vessel import fit_vessel
 
 
@@ -44,7 +44,7 @@ def test_stray_component_does_not_change_the_voxel_grid():
 def test_small_cap_files_are_accepted(tmp_path):
     """Caps of a 3 mm-wide vessel: the whole-vessel size check must not apply to them."""
     z = np.linspace(0, 40, 81)
-    from vcs.phantom import sweep_tube
+    from vcs.phantoms import sweep_tube
 
     V, F = sweep_tube(np.column_stack([0 * z, 0 * z, z]), 1.5, edge=0.3)
     trimesh.Trimesh(V, F, process=False).export(tmp_path / "w.stl")

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from vcs.io import Surface
-from vcs.phantom import make_phantom
 from vcs.mesh import signed_volume
+from vcs.phantoms import make_phantom
 from vcs.surface import wall_mesh
 from vcs.vessel import VesselModel, fit_vessel
 from vcs.wall import lsq_wall, periodic_design_matrix
@@ -82,8 +82,8 @@ def test_wall_stl_is_closed_outward_on_model_and_well_shaped(kind):
 
 
 def test_sensitivity_csv(tmp_path):
-    from vcs.phantom import write_stl
     from vcs.cli import main
+    from vcs.phantoms import write_stl
 
     ph = make_phantom("tube", resolution=2.0)
     write_stl(ph, tmp_path / "t.stl")

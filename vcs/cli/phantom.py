@@ -16,7 +16,8 @@ def cmd_phantom(args: argparse.Namespace) -> None:
         ``kind`` (aorta, tube, torus, helix), ``seed``, ``resolution`` (target triangle edge, mm),
         ``params`` (JSON path or None) and ``output`` (STL path; parent directories are created).
     """
-    from vcs.phantom import make_phantom, write_stl
+    from vcs.phantoms.factory import make_phantom
+    from vcs.phantoms.sweep import write_stl
 
     ph = make_phantom(args.kind, seed=args.seed, resolution=args.resolution)
     out = Path(args.output)
