@@ -239,12 +239,15 @@ def test_atlas_statistics_never_reach_plotting():
 
 
 def test_subpackages_import_their_modules_not_themselves():
-    """Inside vcs.atlas and vcs.cli, imports name full module paths (vcs.atlas.pca), never the
-    package (whose __init__ imports everything), and the command modules of vcs.cli import
-    vcs.cli._args and the library only, never the parser (vcs.cli.main) or each other."""
+    """Inside every subpackage (vcs.atlas, vcs.cfd, vcs.cli, vcs.phantoms), imports name full module
+    paths (vcs.atlas.pca), never the package (whose __init__ imports everything), and the command
+    modules of vcs.cli import vcs.cli._args and the library only, never the parser (vcs.cli.main)
+    or each other."""
     graph = import_graph()
+    packages = sorted(m for m, path in vcs_modules().items() if _is_package(path) and m != "vcs")
+    assert {"vcs.atlas", "vcs.cfd", "vcs.cli", "vcs.phantoms"} <= set(packages)
     bad = []
-    for package in ("vcs.atlas", "vcs.cli"):
+    for package in packages:
         for m in sorted(graph):
             if m.startswith(package + ".") and package in graph[m]:
                 bad.append(f"{m} imports {package}")
@@ -254,3 +257,35 @@ def test_subpackages_import_their_modules_not_themselves():
             if n.startswith("vcs.cli") and n != "vcs.cli._args":
                 bad.append(f"{m} imports {n}")
     assert not bad, "; ".join(bad)
+
+
+def test_dependency_direction():
+    """workflow/ -> vcs/ -> numpy/scipy: vcs never imports snakemake or workflow code; jinja2 (the
+    OpenFOAM templates) only inside vcs.cfd; no module outside vcs.cfd imports vcs.cfd except the
+    CLI (none does today)."""
+    external = external_imports()
+    bad = [f"{m} imports {pkg}" for m, pkgs in external.items() for pkg in pkgs
+           if pkg in ("snakemake", "workflow", "vcsflow") or (pkg == "jinja2" and not m.startswith("vcs.cfd"))]
+    graph = import_graph()
+    bad += [f"{m} imports {n}" for m, targets in graph.items() for n in targets
+            if n.startswith("vcs.cfd") and not m.startswith(("vcs.cfd", "vcs.cli"))]
+    assert not bad, "; ".join(bad)
+
+
+def test_workflow_holds_snakemake_files_only():
+    """workflow/: rules, schemas, envs and thin scripts; Python only in workflow/scripts/."""
+    workflow = VCS_DIR.parent / "workflow"
+    stray = sorted(str(p.relative_to(workflow)) for p in workflow.rglob("*.py")
+                   if p.parent != workflow / "scripts" and "__pycache__" not in p.parts)
+    assert not stray, f"Python outside workflow/scripts/: {stray}"
+
+
+def test_every_package_is_in_the_wheel_list():
+    """pyproject's explicit package list names every package under vcs/ (a missing one would be
+    left out of a non-editable install)."""
+    import tomllib
+
+    pyproject = tomllib.loads((VCS_DIR.parent / "pyproject.toml").read_text())
+    listed = set(pyproject["tool"]["setuptools"]["packages"])
+    packages = {m for m, path in vcs_modules().items() if _is_package(path)}
+    assert listed == packages, f"pyproject packages {sorted(listed)} vs vcs/ packages {sorted(packages)}"

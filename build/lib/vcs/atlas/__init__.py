@@ -1,0 +1,73 @@
+"""Statistical atlas of vessel shape and flow (paper Section 2.3: coregistration, PCA).
+
+The pieces, each a plain function or a small frozen value object:
+
+* :mod:`vcs.atlas.procrustes`: :func:`procrustes` / :func:`generalized_procrustes`, rigid
+  (optionally similarity) alignment of corresponding point sets (Section 2.3.2) on the Eq. 8 wall
+  grid (:func:`wall_grid_points`); :func:`transform_model`, :func:`align_models`.
+* :mod:`vcs.atlas.pca`: :class:`PCA` (Section 2.3.3) of feature vectors (:func:`shape_matrix`) or
+  of resampled flow fields (:func:`flow_vector`); :func:`mode_deformation` (paper Fig. 7);
+  :func:`top_variation_mask`.
+* :mod:`vcs.atlas.regression`: :func:`ridge_loo` (beyond the paper), shape scores -> flow scores
+  ridge regression with leave-one-out cross-validated R^2.
+* :mod:`vcs.atlas.cohort`: :func:`status_exclusion`, :func:`compute_atlas` (the whole cohort
+  pipeline, arrays only), :func:`project_model`, :func:`atlas_summary`.
+* :mod:`vcs.atlas.build`: :func:`build_atlas` writes ``atlas.json``, ``atlas.npz`` and the figures.
+* :mod:`vcs.atlas.plots`: the figures and geometry files (pyvista, matplotlib).
+
+The statistics modules (procrustes, pca, regression, cohort) are pure numpy/scipy and never import
+:mod:`vcs.atlas.plots`; plotting imports them, and :mod:`vcs.atlas.build` (imported here) imports
+the plotting module only when it writes figures.
+"""
+from vcs.atlas.build import build_atlas
+from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas, project_model, status_exclusion
+from vcs.atlas.pca import (
+    FLOW_FIELDS,
+    PCA,
+    SHAPE_BLOCKS,
+    VECTOR_FIELDS,
+    flow_vector,
+    mode_deformation,
+    shape_matrix,
+    top_variation_mask,
+)
+from vcs.atlas.procrustes import (
+    TWO_PI,
+    RigidTransform,
+    align_models,
+    check_compatible,
+    generalized_procrustes,
+    procrustes,
+    transform_model,
+    wall_grid,
+    wall_grid_points,
+)
+from vcs.atlas.regression import DEFAULT_ALPHAS, ridge_loo
+
+__all__ = [
+    "DEFAULT_ALPHAS",
+    "FLOW_FIELDS",
+    "PCA",
+    "SHAPE_BLOCKS",
+    "TWO_PI",
+    "VECTOR_FIELDS",
+    "Atlas",
+    "RigidTransform",
+    "align_models",
+    "atlas_summary",
+    "build_atlas",
+    "check_compatible",
+    "compute_atlas",
+    "flow_vector",
+    "generalized_procrustes",
+    "mode_deformation",
+    "procrustes",
+    "project_model",
+    "ridge_loo",
+    "shape_matrix",
+    "status_exclusion",
+    "top_variation_mask",
+    "transform_model",
+    "wall_grid",
+    "wall_grid_points",
+]

@@ -1,0 +1,75 @@
+"""Build the cohort atlas on disk: compute it (:mod:`vcs.atlas.cohort`), write atlas.json and
+atlas.npz, and the figures (:mod:`vcs.atlas.plots`).
+
+The one module that uses both the atlas statistics and its plotting; the plotting module is
+imported only when figures are asked for.
+"""
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas
+
+if TYPE_CHECKING:
+    from vcs.vessel import VesselModel
+
+log = logging.getLogger("vcs.atlas")  # the logger name of the former vcs/atlas.py: same log lines
+
+
+def build_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[str, Any] | str | Path],
+                statuses: Mapping[str, Mapping[str, Any] | None], out_dir: str | Path, *, n_modes: int = 3,
+                figures: bool = True, **options: Any) -> Atlas:
+    """Compute the atlas (:func:`vcs.atlas.cohort.compute_atlas`) and write it to ``out_dir``.
+
+    Writes ``atlas.json`` (patients included/excluded with reasons, explained variances, scores,
+    regression R^2), ``atlas.npz`` (every PCA's mean, modes, sigma, scores; the field grid) and,
+    with ``figures``, the VTP/VTU/PNG files of :func:`vcs.atlas.plots.write_atlas_figures`.
+
+    Parameters
+    ----------
+    models : {patient id: VesselModel}
+    fields : {patient id: dict of resampled arrays, or path of a ``fields.npz``}
+    statuses : {patient id: status dict or None}
+        See :func:`vcs.atlas.cohort.status_exclusion`.
+    out_dir : str or Path
+        Output directory (created when missing).
+    n_modes : int
+        Modes kept per PCA.
+    figures : bool
+        Also write the figures; atlas.json then lists them (``files``) and the 3-D ``renderer``.
+    **options
+        Further keyword arguments of :func:`vcs.atlas.cohort.compute_atlas`.
+
+    Returns
+    -------
+    Atlas
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    loaded: dict[str, Mapping[str, Any]] = {}
+    for pid, f in fields.items():
+        if isinstance(f, (str, Path)):
+            with np.load(f) as z:
+                loaded[pid] = {k: z[k] for k in z.files}
+        else:
+            loaded[pid] = f
+    atlas = compute_atlas(models, loaded, statuses, n_modes=n_modes, **options)
+    summary = atlas_summary(atlas)
+    arrays: dict[str, Any] = {**atlas.shape.arrays("shape"),
+                              **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{f}").items()}}
+    arrays.update({f"grid_{k}": v for k, v in atlas.grid.items()})
+    np.savez_compressed(out / "atlas.npz", **arrays)
+    if figures:
+        from vcs.atlas.plots import write_atlas_figures
+
+        written = write_atlas_figures(atlas, out)
+        summary["files"], summary["renderer"] = written["files"], written["renderer"]
+    (out / "atlas.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    log.info("atlas of %d patients (%d excluded) written to %s", len(atlas.patients), len(atlas.excluded), out)
+    return atlas

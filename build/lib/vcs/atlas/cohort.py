@@ -1,0 +1,264 @@
+"""The cohort atlas (paper Section 2.3): who is included, and coregistration + shape PCA + flow PCA +
+shape -> flow regression of the included patients, as arrays (no files; see :mod:`vcs.atlas.build`).
+
+Pure numpy/scipy; never imports plotting (:mod:`vcs.atlas.plots`).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from vcs.atlas.pca import FLOW_FIELDS, PCA, flow_vector, shape_matrix
+from vcs.atlas.procrustes import (
+    RigidTransform,
+    align_models,
+    check_compatible,
+    procrustes,
+    transform_model,
+    wall_grid_points,
+)
+from vcs.atlas.regression import ridge_loo
+from vcs.errors import VCSInputError
+
+if TYPE_CHECKING:
+    from vcs.vessel import VesselModel
+
+
+def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool = False) -> str | None:
+    """Reason to exclude a patient from its case ``status.json`` (None: include).
+
+    Excluded when the file is missing, ``failed`` is true, ``status``/``state`` names a failure,
+    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``). With
+    ``accept_relaxed``, a case whose SIMPLE run did not converge but whose time-averaged fallback
+    met the relaxed criterion (``converged_relaxed`` true) is included. The reason quotes the
+    status's own ``reason``/``error``/``message``.
+
+    Parameters
+    ----------
+    status : mapping or None
+        The parsed status.json; None when the file is missing.
+    accept_relaxed : bool
+        Include cases that met only the relaxed (time-averaged) convergence criterion.
+
+    Returns
+    -------
+    str or None
+        One-line reason, or None to include the patient.
+    """
+    if status is None:
+        return "no status.json"
+    detail = next((str(status[k]) for k in ("reason", "error", "message") if status.get(k)), "")
+    detail = f": {detail}" if detail else ""
+    state = str(status.get("status", status.get("state", ""))).lower()
+    if status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout"):
+        return f"solver failed ({state or 'failed'}){detail}"
+    if status.get("converged") is False:
+        if accept_relaxed and status.get("converged_relaxed") is True:
+            return None
+        return f"not converged{detail}"
+    return None
+
+
+@dataclass(frozen=True)
+class Atlas:
+    """Result of :func:`compute_atlas` (all arrays; no files).
+
+    Attributes
+    ----------
+    patients : list of str
+        Included patient ids (n), in input order.
+    excluded : dict
+        {patient id: reason} of the excluded patients.
+    aligned_models : list of VesselModel
+        The included models in atlas space.
+    transforms : list of RigidTransform
+        Model -> atlas space, one per included patient.
+    alignment_report : dict
+        GPA report (:func:`vcs.atlas.procrustes.align_models`) without the mean points.
+    shape : PCA
+        Shape PCA of the aligned feature vectors (mm).
+    flow : dict
+        {field: PCA} of the flow measurement vectors.
+    field_shapes : dict
+        {field: grid shape of the measurement vector}, e.g. (n_tau, n_theta, n_rho, 3).
+    grid : dict
+        ``tau``, ``theta`` (rad), ``rho_n`` 1-D arrays of the resampled fields' grid.
+    regression : dict
+        {field: :func:`vcs.atlas.regression.ridge_loo` result}.
+    options : dict
+        The options the atlas was computed with.
+    alignment_mean : (n_tau_align * n_theta_align, 3) float, mm
+        GPA mean wall grid, the target a new vessel is aligned to.
+    """
+
+    patients: list[str]
+    excluded: dict[str, str]
+    aligned_models: list[VesselModel]
+    transforms: list[RigidTransform]
+    alignment_report: dict[str, Any]
+    shape: PCA
+    flow: dict[str, PCA]  # field -> PCA
+    field_shapes: dict[str, tuple[int, ...]]  # field -> grid shape of the measurement vector
+    grid: dict[str, np.ndarray]  # tau, theta, rho_n of the resampled fields
+    regression: dict[str, dict[str, Any]]  # field -> ridge_loo result
+    options: dict[str, Any]
+    alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
+
+
+def compute_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[str, Any]],
+                  statuses: Mapping[str, Mapping[str, Any] | None], *, n_modes: int = 3,
+                  n_regression_scores: int | None = None, scale: bool = False, n_tau_align: int = 40,
+                  n_theta_align: int = 24, flow_frame: str = "vcs", flow_fields: Sequence[str] = FLOW_FIELDS,
+                  shape_block: str = "all", accept_relaxed: bool = False) -> Atlas:
+    """Coregistration, shape PCA, flow PCA and shape -> flow regression of a cohort.
+
+    Parameters
+    ----------
+    models : {patient id: VesselModel}
+    fields : {patient id: dict of resampled arrays}
+        As returned by :func:`vcs.cfd.resample.sample_case` or loaded from ``fields.npz``; a patient
+        without fields is excluded.
+    statuses : {patient id: status dict or None}
+        From each case's status.json; see :func:`status_exclusion`. Patients absent from
+        ``statuses`` count as included.
+    n_modes : int
+        Modes kept per PCA (at most n_included - 1).
+    n_regression_scores : int, optional
+        k shape scores used to predict flow scores (default ``n_modes``).
+    scale : bool
+        Similarity instead of rigid alignment (default rigid; see
+        :func:`vcs.atlas.procrustes.generalized_procrustes`).
+    n_tau_align, n_theta_align : int
+        Wall grid of the alignment correspondences.
+    flow_frame : {"vcs", "cartesian"}
+        Local-frame vector components (default) or Cartesian ones (:func:`vcs.atlas.pca.flow_vector`).
+    flow_fields : sequence of str
+        Fields with a flow PCA (default U, p, WSS).
+    shape_block : {"all", "wall", "centerline"}
+        Which part of the feature vector the shape PCA varies (:func:`vcs.atlas.pca.shape_matrix`).
+    accept_relaxed : bool
+        Include time-averaged cases that met the relaxed criterion (:func:`status_exclusion`).
+
+    Returns
+    -------
+    Atlas
+
+    Raises
+    ------
+    VCSInputError
+        Fewer than 3 included patients, or fields resampled on different grids.
+    """
+    excluded = {}
+    for pid in models:
+        reason = status_exclusion(statuses[pid], accept_relaxed=accept_relaxed) if pid in statuses else None
+        if reason is None and pid not in fields:
+            reason = "no resampled fields"
+        if reason is not None:
+            excluded[pid] = reason
+    patients = [pid for pid in models if pid not in excluded]
+    if len(patients) < 3:
+        raise VCSInputError(f"an atlas needs at least 3 included patients, got {len(patients)} (excluded: {excluded})")
+    shapes0 = {f: np.shape(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f])
+               for f in flow_fields}
+    for pid in patients:
+        for f in flow_fields:
+            key = f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f
+            if np.shape(fields[pid].get(key)) != shapes0[f]:
+                raise VCSInputError(
+                    f"patient {pid}: field {key} has shape {np.shape(fields[pid].get(key))}, patient {patients[0]} "
+                    f"{shapes0[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
+                )
+    aligned, transforms, report = align_models([models[p] for p in patients], n_tau=n_tau_align,
+                                               n_theta=n_theta_align, scale=scale)
+    gpa_mean = report.pop("mean_points_mm")
+    shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
+    flow = {f: PCA.from_data(np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients]), n_modes)
+            for f in flow_fields}
+    k = min(n_regression_scores or n_modes, shape.n_modes)
+    regression = {f: ridge_loo(shape.scores[:, :k], flow[f].scores) for f in flow_fields}
+    f0 = fields[patients[0]]
+    grid = {key: np.asarray(f0[key]) for key in ("tau", "theta", "rho_n") if key in f0}
+    return Atlas(patients, excluded, aligned, transforms, report, shape, flow, shapes0, grid, regression,
+                 {"n_modes": n_modes, "n_regression_scores": k, "scale": scale, "flow_frame": flow_frame,
+                  "n_tau_align": n_tau_align, "n_theta_align": n_theta_align,
+                  "shape_block": shape_block, "accept_relaxed": accept_relaxed}, gpa_mean)
+
+
+def project_model(atlas: Atlas, model: VesselModel, *, n_modes: int | None = None) -> dict[str, Any]:
+    """Project a new vessel onto the atlas's shape modes.
+
+    The model is first aligned rigidly (or by similarity, as the atlas) to the atlas's GPA mean wall
+    grid by :func:`vcs.atlas.procrustes.procrustes` on its Eq. 8 wall grid (as the cohort was); its
+    feature vector is then projected.
+
+    Parameters
+    ----------
+    atlas : Atlas
+    model : VesselModel
+        Compatible with the atlas's models (same L, K, R).
+    n_modes : int, optional
+        Modes used (default all of the shape PCA's).
+
+    Returns
+    -------
+    dict
+        ``scores`` (k,) mm, ``scores_sigma`` (k,) (scores / sigma), ``reconstruction`` (d,) (feature
+        vector from the first k modes), ``error`` (float, |a - a_hat| in mm over the whole
+        vector), ``transform`` (RigidTransform, model -> atlas space), ``aligned_model``.
+
+    Raises
+    ------
+    VCSInputError
+        ``model`` is incompatible with the atlas (:func:`vcs.atlas.procrustes.check_compatible`).
+    """
+    template = atlas.aligned_models[0]
+    check_compatible([template, model])
+    n_tau, n_theta = atlas.options["n_tau_align"], atlas.options["n_theta_align"]
+    T = procrustes(wall_grid_points(model, n_tau, n_theta), atlas.alignment_mean, scale=atlas.options["scale"])
+    aligned = transform_model(model, T)
+    a = aligned.feature_vector()
+    k = atlas.shape.n_modes if n_modes is None else min(n_modes, atlas.shape.n_modes)
+    s = atlas.shape.transform(a)[:k]
+    a_hat = atlas.shape.mean + s @ atlas.shape.components[:k]
+    return {"scores": s, "scores_sigma": s / atlas.shape.sigma[:k], "reconstruction": a_hat,
+            "error": float(np.linalg.norm(a - a_hat)), "transform": T, "aligned_model": aligned}
+
+
+def atlas_summary(atlas: Atlas) -> dict[str, Any]:
+    """The content of atlas.json.
+
+    Parameters
+    ----------
+    atlas : Atlas
+
+    Returns
+    -------
+    dict
+        JSON-ready: patients included/excluded (with reasons), options, alignment (with each
+        patient's transform), explained variances, sigmas and scores of the shape and flow PCAs,
+        and the leave-one-out R^2 of the shape -> flow regression (null where undefined).
+    """
+    return {
+        "patients_included": list(atlas.patients),
+        "patients_excluded": [{"id": p, "reason": r} for p, r in atlas.excluded.items()],
+        "options": atlas.options,
+        "alignment": {**atlas.alignment_report,
+                      "transforms": {p: t.to_dict() for p, t in zip(atlas.patients, atlas.transforms)}},
+        "shape_explained_variance": atlas.shape.explained_variance_ratio.tolist(),
+        "shape_sigma": atlas.shape.sigma.tolist(),
+        "shape_scores": {p: s.tolist() for p, s in zip(atlas.patients, atlas.shape.scores)},
+        "flow_explained_variance": {f: pca.explained_variance_ratio.tolist() for f, pca in atlas.flow.items()},
+        "flow_sigma": {f: pca.sigma.tolist() for f, pca in atlas.flow.items()},
+        "flow_scores": {f: {p: s.tolist() for p, s in zip(atlas.patients, pca.scores)}
+                        for f, pca in atlas.flow.items()},
+        "shape_to_flow_regression": {
+            "method": "ridge on the first k standardised shape scores, alpha by inner leave-one-out; "
+                      "R^2 by outer leave-one-out (1 - PRESS / SS_tot)",
+            "k_shape_scores": atlas.options["n_regression_scores"],
+            "loo_r2": {f: [None if not np.isfinite(v) else float(v) for v in r["r2"]]
+                       for f, r in atlas.regression.items()},
+        },
+    }

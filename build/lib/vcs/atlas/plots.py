@@ -1,0 +1,445 @@
+"""Atlas figures and geometry files: VTP/VTU (pyvista) and PNG (pyvista off-screen, matplotlib Agg).
+
+Imports the atlas statistics (:mod:`vcs.atlas.procrustes`, :mod:`vcs.atlas.pca`,
+:mod:`vcs.atlas.cohort`); they never import this module.
+
+Everything renders headless. 3-D views use pyvista off-screen; when VTK cannot open an off-screen
+render window (no OSMesa/EGL build, no display), the same figure is drawn with matplotlib as a 2-D
+longitudinal section (tau, signed rho) and the fallback is recorded in the returned file list.
+
+Files written by :func:`write_atlas_figures` into ``out_dir`` (all in mm, atlas space):
+
+* ``shape_mean.vtp``: the mean shape, wall surface (Eq. 8) + centerline polyline;
+* ``shape_mode{k}_{plus,minus}2sigma.vtp``: mean +- 2 sigma along shape mode k, with point data
+  ``centerline_displacement`` (|delta c(tau)|), ``radius_change`` (delta rho_w), ``displacement``;
+* ``shape_mode{k}_deformation.png``: paper Fig. 7 (|delta c| vs tau, delta rho_w over (tau, theta));
+* ``explained_variance.png``: shape and flow explained variance per mode;
+* ``flow_mean.vtu``: mean U, p, WSS on the mean shape's grid; per field and mode the mode's
+  +-2 sigma fields and a ``{field}_mode{k}_top20`` mask (cells in the top 20 % of the variation);
+* ``flow_{field}_mode{k}.png``: theta-clipped lumen views (paper Figs. 8-9): mean - 2 sigma, mean,
+  mean + 2 sigma, and the top-20 % region.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from vcs.atlas.cohort import Atlas
+from vcs.atlas.pca import PCA, VECTOR_FIELDS, mode_deformation, top_variation_mask
+from vcs.atlas.procrustes import TWO_PI
+from vcs.grid import from_vcs_components, grid_points, grid_to_vtk, local_frame
+
+if TYPE_CHECKING:
+    import pyvista
+
+    from vcs.vessel import VesselModel
+
+PathLike = str | Path
+
+log = logging.getLogger(__name__)
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+# ---------------------------------------------------------------------------------------------
+# Shapes
+# ---------------------------------------------------------------------------------------------
+def shape_polydata(model: VesselModel, *, n_tau: int = 101, n_theta: int = 48,
+                   point_arrays: dict[str, np.ndarray] | None = None) -> pyvista.PolyData:
+    """Wall surface (Eq. 8 on a (tau, theta) grid, seam closed) plus the centerline as one PolyData.
+
+    Parameters
+    ----------
+    model : VesselModel
+    n_tau, n_theta : int
+        Wall grid: tau in [0, 1] (ends included), theta = 2 pi j / n_theta.
+    point_arrays : dict of (n_tau, n_theta[, ...]) arrays, optional
+        Point data on the wall grid; the centerline points get 0. Point data ``tau`` and
+        ``theta`` are always added.
+
+    Returns
+    -------
+    pyvista.PolyData
+        Points in mm: the wall quads, then the n_tau centerline points as one polyline.
+    """
+    import pyvista as pv
+
+    tau = np.linspace(0.0, 1.0, n_tau)
+    theta = TWO_PI * np.arange(n_theta) / n_theta
+    T, TH = np.meshgrid(tau, theta, indexing="ij")
+    arrays = {"tau": T, "theta": TH, **(point_arrays or {})}
+    wall = grid_to_vtk(model.surface_points(T, TH), arrays)
+    line = pv.lines_from_points(model.vcs.curve(tau))
+    for k, v in wall.point_data.items():
+        line.point_data[k] = np.zeros((line.n_points, *np.shape(v)[1:]))
+    line.point_data["tau"] = tau
+    return wall.append_polydata(line)
+
+
+def write_shape_files(pca: PCA, template: VesselModel, out_dir: PathLike, *, n_modes: int | None = None,
+                      n_sigma: float = 2.0) -> dict[str, str]:
+    """Mean shape and mean +- n_sigma shapes (VTP) and the Fig. 7 deformation PNG per mode.
+
+    Parameters
+    ----------
+    pca : PCA
+        Shape PCA of feature vectors.
+    template : VesselModel
+        Rebuilds models from feature vectors (knots, K, R, frame rule).
+    out_dir : str or Path
+        Existing output directory.
+    n_modes : int, optional
+        Modes written (default all).
+    n_sigma : float
+        The +- shapes are mean +- n_sigma sigma_m u_m.
+
+    Returns
+    -------
+    dict
+        {what: file name relative to ``out_dir``}: ``shape_mean`` (VTP), ``shape_mean_png`` and per
+        mode k (1-based) ``shape_mode{k}_plus``, ``shape_mode{k}_minus`` (VTP, mm) and
+        ``shape_mode{k}_deformation`` (PNG).
+    """
+    from vcs.vessel import VesselModel
+
+    out = Path(out_dir)
+    files = {"shape_mean": "shape_mean.vtp"}
+    mean = VesselModel.from_feature_vector(pca.mean, template)
+    shape_polydata(mean).save(str(out / files["shape_mean"]))
+    mean_shape_png(mean, out / "shape_mean.png")
+    files["shape_mean_png"] = "shape_mean.png"
+    for k in range(min(n_modes or pca.n_modes, pca.n_modes)):
+        for sign, tag in ((1.0, "plus"), (-1.0, "minus")):
+            d = mode_deformation(pca, template, k, n_sigma=sign * n_sigma)
+            T, TH = np.meshgrid(d["tau"], d["theta"], indexing="ij")
+            disp = np.linalg.norm(d["mode_model"].surface_points(T, TH) - mean.surface_points(T, TH), axis=-1)
+            arrays = {"centerline_displacement": np.repeat(d["centerline_displacement"][:, None], len(d["theta"]), 1),
+                      "radius_change": d["radius_change"], "displacement": disp}
+            name = f"shape_mode{k + 1}_{tag}{n_sigma:g}sigma.vtp"
+            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]),
+                           point_arrays=arrays).save(str(out / name))
+            files[f"shape_mode{k + 1}_{tag}"] = name
+            if sign > 0:
+                png = f"shape_mode{k + 1}_deformation.png"
+                deformation_png(d, out / png, title=f"shape mode {k + 1} (+{n_sigma:g} sigma, "
+                                                    f"{100 * pca.explained_variance_ratio[k]:.1f}% variance)")
+                files[f"shape_mode{k + 1}_deformation"] = png
+    return files
+
+
+def mean_shape_png(mean: VesselModel, path: PathLike, *,
+                   root_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)) -> None:
+    """PNG of the mean shape's wall radius: a map and cross-sections near the root.
+
+    The wall radius rho_w(tau, theta) (mm) as a map over (tau, theta), and the cross-sections at
+    ``root_taus`` as polar curves (the sinuses of Valsalva show as three lobes).
+
+    Parameters
+    ----------
+    mean : VesselModel
+        The mean shape (a wall model is needed).
+    path : str or Path
+        Output PNG.
+    root_taus : tuple of float
+        tau of the cross-sections, in [0, 1].
+    """
+    plt = _plt()
+    th = np.linspace(0.0, TWO_PI, 181)
+    tau = np.linspace(0.0, 1.0, 201)
+    R = mean.wall(tau[:, None], th[None, :])
+    fig = plt.figure(figsize=(10, 3.8), dpi=110)
+    ax = fig.add_subplot(1, 2, 1)
+    im = ax.imshow(R.T, origin="lower", aspect="auto", extent=(0, 1, 0, TWO_PI), cmap="viridis")
+    ax.set_xlabel("tau")
+    ax.set_ylabel("theta (rad)")
+    ax.set_title("mean shape: wall radius rho_w (mm)")
+    fig.colorbar(im, ax=ax)
+    axp = fig.add_subplot(1, 2, 2, projection="polar")
+    radii = [mean.wall(np.full_like(th, t), th) for t in root_taus]
+    for t, r in zip(root_taus, radii):
+        axp.plot(th, r, label=f"tau = {t:g}")
+    axp.set_rmin(0.8 * min(r.min() for r in radii))  # an offset radial axis shows the lobes
+    axp.set_title("cross-sections near the root (mm)", fontsize=9)
+    axp.legend(fontsize=7, loc="lower left", bbox_to_anchor=(1.0, 0.0))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def deformation_png(d: dict[str, Any], path: PathLike, *, title: str = "") -> None:
+    """PNG of paper Fig. 7: centerline displacement |delta c(tau)| and radius change delta rho_w(tau, theta).
+
+    Parameters
+    ----------
+    d : dict
+        A :func:`vcs.atlas.pca.mode_deformation` result (mm).
+    path : str or Path
+        Output PNG.
+    title : str
+        Figure title (default ``"mode <m + 1>"``).
+    """
+    plt = _plt()
+    fig, (a0, a1) = plt.subplots(2, 1, figsize=(7, 5.5), dpi=110, sharex=True)
+    a0.plot(d["tau"], d["centerline_displacement"], "k-")
+    a0.set_ylabel("|delta c(tau)| (mm)")
+    a0.set_title(title or f"mode {d['mode'] + 1}")
+    lim = max(float(np.abs(d["radius_change"]).max()), 1e-12)
+    im = a1.imshow(d["radius_change"].T, origin="lower", aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim,
+                   extent=(0, 1, 0, TWO_PI))
+    a1.set_xlabel("tau")
+    a1.set_ylabel("theta (rad)")
+    fig.colorbar(im, ax=[a0, a1], label="delta rho_w (mm)", shrink=0.6)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
+    """PNG bar chart of the explained variance (%) per mode of the shape PCA and each flow PCA.
+
+    Parameters
+    ----------
+    atlas : Atlas
+    path : str or Path
+        Output PNG.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.5), dpi=110)
+    series = {"shape": atlas.shape.explained_variance_ratio,
+              **{f: p.explained_variance_ratio for f, p in atlas.flow.items()}}
+    w = 0.8 / len(series)
+    for i, (name, v) in enumerate(series.items()):
+        ax.bar(np.arange(1, len(v) + 1) + (i - (len(series) - 1) / 2) * w, 100 * v, w, label=name)
+    ax.set_xlabel("mode")
+    ax.set_ylabel("explained variance (%)")
+    ax.set_xticks(np.arange(1, atlas.shape.n_modes + 1))
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------
+# Flow
+# ---------------------------------------------------------------------------------------------
+def _field_cartesian(vec: np.ndarray, name: str, shape: tuple, frame: np.ndarray, flow_frame: str) -> np.ndarray:
+    a = np.asarray(vec).reshape(shape)
+    if name != "p" and flow_frame == "vcs":
+        a = from_vcs_components(a, frame)
+    return a
+
+
+def _scalar(a: np.ndarray) -> np.ndarray:
+    """Magnitude of a (n_tau, n_theta, n_rho, 3) vector field; scalars pass through."""
+    return np.linalg.norm(a, axis=-1) if a.ndim == 4 else a
+
+
+def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.UnstructuredGrid, dict[str, Any]]:
+    """The flow atlas on the mean shape's (tau, theta, rho_n) grid as a pyvista UnstructuredGrid (mm).
+
+    Surface fields (WSS, (n_tau, n_theta, 3)) are put on the rho_n = 1 layer (zero inside).
+    Vector fields are Cartesian (converted from VCS components when the atlas used them).
+
+    Parameters
+    ----------
+    atlas : Atlas
+        With flow PCAs and the field grid.
+    mean_model : VesselModel
+        The mean shape, whose grid points carry the fields.
+
+    Returns
+    -------
+    grid : pyvista.UnstructuredGrid
+        Point data ``{field}_mean``, ``{field}_mode{k}_plus2sigma``, ``{field}_mode{k}_minus2sigma``,
+        ``{field}_mode{k}_top20`` (uint8 mask) and ``rho_n``.
+    info : dict
+        ``points`` ((n_tau, n_theta, n_rho, 3) float, mm) and ``panels``: {field: {"mean": array,
+        "modes": [(minus, plus, top20 mask) per mode]}}, arrays of shape (n_tau, n_theta, n_rho[, 3]).
+    """
+    tau, theta, rho_n = atlas.grid["tau"], atlas.grid["theta"], atlas.grid["rho_n"]
+    pts, _ = grid_points(mean_model, tau, theta, rho_n)
+    frame = local_frame(mean_model, tau, theta)
+    n_rho = len(rho_n)
+    arrays, panels = {}, {}
+    for f, pca in atlas.flow.items():
+        shape = atlas.field_shapes[f]
+        ff = atlas.options["flow_frame"]
+
+        def vol(a):
+            if a.shape[:3] != pts.shape[:3]:  # wall field (n_tau, n_theta[, 3]) -> rho_n = 1 layer
+                full = np.zeros((*a.shape[:2], n_rho, *a.shape[2:]))
+                full[:, :, -1] = a
+                return full
+            return a
+
+        mean = vol(_field_cartesian(pca.mean, f, shape, frame, ff))
+        arrays[f"{f}_mean"] = mean
+        panels[f] = {"mean": mean, "modes": []}
+        for k in range(pca.n_modes):
+            plus = vol(_field_cartesian(pca.mode_sample(k, 2.0), f, shape, frame, ff))
+            minus = vol(_field_cartesian(pca.mode_sample(k, -2.0), f, shape, frame, ff))
+            mask = top_variation_mask(pca, k, shape, vector=f in VECTOR_FIELDS)
+            if mask.shape != pts.shape[:3]:
+                full = np.zeros((*mask.shape, n_rho), bool)
+                full[:, :, -1] = mask
+                mask = full
+            arrays[f"{f}_mode{k + 1}_plus2sigma"] = plus
+            arrays[f"{f}_mode{k + 1}_minus2sigma"] = minus
+            arrays[f"{f}_mode{k + 1}_top20"] = mask.astype(np.uint8)
+            panels[f]["modes"].append((minus, plus, mask))
+    arrays["rho_n"] = np.broadcast_to(rho_n, pts.shape[:3])
+    return grid_to_vtk(pts, arrays), {"points": pts, "panels": panels}
+
+
+def _half(a: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    keep = theta <= np.pi + 1e-9
+    return a[:, keep]
+
+
+def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list[tuple[str, np.ndarray, str]],
+                     path: PathLike, *, label: str, view_normal: np.ndarray | None = None) -> str:
+    """PNG of theta-clipped lumen views (paper Figs. 8-9), one view per panel.
+
+    Shows the half theta in [0, pi] of each panel's grid, so the cut planes theta = 0 and
+    theta = pi show the field inside the lumen. Without an off-screen render window, a 2-D
+    longitudinal section (tau, signed rho_n) is drawn with matplotlib instead.
+
+    Parameters
+    ----------
+    points : (n_tau, n_theta, n_rho, 3) float, mm
+        Grid points.
+    theta : (n_theta,) float, rad
+    panels : list of (title, (n_tau, n_theta, n_rho) float array, colour map name)
+        Panels sharing the first panel's colour map share its colour limits.
+    path : str or Path
+        Output PNG.
+    label : str
+        Name (with units) of the scalar shown.
+    view_normal : (3,) float, optional
+        Camera direction from the centre (default +z).
+
+    Returns
+    -------
+    str
+        The renderer used: ``"pyvista"`` or ``"matplotlib"``.
+    """
+    pts = _half(points, theta)
+    try:
+        import pyvista as pv
+
+        pv.OFF_SCREEN = True
+        pl = pv.Plotter(off_screen=True, shape=(1, len(panels)), window_size=(420 * len(panels), 520))
+        centre = points.reshape(-1, 3).mean(axis=0)
+        if view_normal is None:
+            view_normal = np.array([0.0, 0.0, 1.0])
+        same = [v for _, v, c in panels if c == panels[0][2]]  # panels sharing a colour map share limits
+        clim = (float(min(np.min(v) for v in same)), float(max(np.max(v) for v in same)))
+        for i, (title, values, cmap) in enumerate(panels):
+            pl.subplot(0, i)
+            g = grid_to_vtk(pts, {label: _half(values, theta)}, close_theta=False)
+            surf = g.extract_surface(algorithm="dataset_surface")
+            pl.add_mesh(surf, scalars=label, cmap=cmap, show_scalar_bar=True,
+                        clim=clim if cmap == panels[0][2] else None,
+                        scalar_bar_args={"title": f"{label} {i}", "vertical": False})
+            pl.add_text(title, font_size=9)
+            pl.camera_position = [tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
+                                  tuple(centre), (0.0, 0.0, 1.0) if abs(view_normal[2]) < 0.9 else (0.0, 1.0, 0.0)]
+        pl.screenshot(str(path))
+        pl.close()
+        return "pyvista"
+    except Exception as exc:  # no off-screen render window: fall back to a 2-D section
+        log.warning("pyvista off-screen rendering failed (%s); drawing %s with matplotlib", exc, Path(path).name)
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 3.2), dpi=110, squeeze=False)
+    j_pi = int(np.argmin(np.abs(theta - np.pi)))
+    for ax, (title, values, cmap) in zip(axes[0], panels):
+        # longitudinal section: theta = 0 above the axis, theta = pi below
+        sec = np.concatenate([values[:, j_pi, ::-1], values[:, 0, 1:]], axis=1)
+        im = ax.imshow(sec.T, origin="lower", aspect="auto", cmap=cmap, extent=(0, 1, -1, 1))
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("tau")
+        ax.set_ylabel("signed rho_n (theta = 0 / pi)")
+        fig.colorbar(im, ax=ax, label=label)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return "matplotlib"
+
+
+def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -> dict[str, Any]:
+    """flow_mean.vtu (:func:`flow_grid`) and the clipped-view PNG of every field and mode.
+
+    Parameters
+    ----------
+    atlas : Atlas
+    mean_model : VesselModel
+        The mean shape.
+    out_dir : str or Path
+        Existing output directory.
+
+    Returns
+    -------
+    dict
+        {what: file name relative to ``out_dir``}: ``flow_mean`` and ``flow_{field}_mode{k}``,
+        plus ``renderer``: the sorted list of 3-D renderers used (not a file).
+    """
+    out = Path(out_dir)
+    grid, info = flow_grid(atlas, mean_model)
+    files: dict[str, Any] = {"flow_mean": "flow_mean.vtu"}
+    grid.save(str(out / files["flow_mean"]))
+    theta = atlas.grid["theta"]
+    # look at the cut planes from the removed side (theta = 3 pi / 2 at mid tau)
+    _, v1, v2 = mean_model.vcs.frame(np.array([0.5]))
+    view = -v2[0]
+    renderers = set()
+    for f, d in info["panels"].items():
+        cmap = "coolwarm" if f == "p" else "viridis"
+        label = {"U": "|U| (m/s)", "p": "p (Pa)", "WSS": "|WSS| (Pa)"}.get(f, f)
+        for k, (minus, plus, mask) in enumerate(d["modes"]):
+            panels = [(f"{f} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
+                      (f"{f} mean", _scalar(d["mean"]), cmap),
+                      (f"{f} mean + 2 sigma (mode {k + 1})", _scalar(plus), cmap),
+                      (f"{f} mode {k + 1}: top 20% variation", mask.astype(float), "Reds")]
+            name = f"flow_{f}_mode{k + 1}.png"
+            renderers.add(clipped_view_png(info["points"], theta, panels, out / name, label=label, view_normal=view))
+            files[f"flow_{f}_mode{k + 1}"] = name
+    files["renderer"] = sorted(renderers)
+    return files
+
+
+def write_atlas_figures(atlas: Atlas, out_dir: PathLike) -> dict[str, Any]:
+    """Write all atlas VTP/VTU/PNG files (see the module doc).
+
+    Parameters
+    ----------
+    atlas : Atlas
+    out_dir : str or Path
+        Existing output directory.
+
+    Returns
+    -------
+    dict
+        ``files``: {what: file name relative to ``out_dir``}; ``renderer``: list of the 3-D
+        renderer(s) used (``"pyvista"``, ``"matplotlib"``), empty without flow figures.
+    """
+    from vcs.vessel import VesselModel
+
+    out = Path(out_dir)
+    template = atlas.aligned_models[0]
+    files: dict[str, Any] = write_shape_files(atlas.shape, template, out, n_modes=atlas.options["n_modes"])
+    explained_variance_png(atlas, out / "explained_variance.png")
+    files["explained_variance"] = "explained_variance.png"
+    if atlas.flow and atlas.grid:
+        mean_model = VesselModel.from_feature_vector(atlas.shape.mean, template)
+        files.update(write_flow_files(atlas, mean_model, out))
+    renderer = files.pop("renderer", [])
+    return {"files": files, "renderer": renderer}

@@ -1,0 +1,33 @@
+"""Everything OpenFOAM (paper Section 2.4): render a case from the Eq. 8 wall STL, run it, read it,
+and resample a finished case onto the vessel's (tau, theta, rho_n) grid.
+
+Public API::
+
+    from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case, sample_case
+
+    state = render_case("case", "wall.stl", {"inlet": {"type": "parabolic", "flow_rate": 3e-5}})
+    status = run_case("case", ranks=2)            # also written to case/status.json
+    fields = sample_case("case", model)           # U, p, WSS on the measurement grid
+    write_fields(fields, "fields.npz")
+
+Modules: :mod:`vcs.cfd.openfoam` (defaults, flavour table, detection, templates),
+:mod:`vcs.cfd.case` (rendering, inlet profile), :mod:`vcs.cfd.run` (meshing, solving, status),
+:mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
+(reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
+"""
+from vcs.cfd.case import render_case
+from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, detect_openfoam
+from vcs.cfd.resample import load_fields, read_case, sample_case, write_fields
+from vcs.cfd.run import run_case
+
+__all__ = [
+    "DEFAULTS",
+    "FLAVOURS",
+    "detect_openfoam",
+    "load_fields",
+    "read_case",
+    "render_case",
+    "run_case",
+    "sample_case",
+    "write_fields",
+]

@@ -1,0 +1,385 @@
+"""Running a rendered OpenFOAM case: blockMesh, snappyHexMesh, checkMesh, the inlet profile,
+[decomposePar], simpleFoam (start-up, main stage, optional averaging fallback),
+[reconstructPar], wallShearStress; convergence, flow rates, pressure difference and WSS
+collected into ``status.json``."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vcs.cfd.case import CASE_JSON, inlet_profile, patch_role, render_files
+from vcs.cfd.foamfiles import last_function_value, mean_function_value, parse_solver_log, patch_geometry
+from vcs.cfd.openfoam import detect_openfoam, foam_env
+
+# --------------------------------------------------------------------------- running
+
+
+class _Runner:
+    def __init__(self, case_dir: Path, timings: dict, timeout: float | None):
+        self.case = case_dir
+        self.logs = case_dir / "logs"
+        self.logs.mkdir(exist_ok=True)
+        self.timings = timings
+        self.timeout = timeout
+        self.env = foam_env()
+
+    def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess:
+        cmd = list(args)
+        if ranks > 1:
+            mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
+            if hasattr(os, "geteuid") and os.geteuid() == 0:
+                mpi.insert(1, "--allow-run-as-root")
+            for var in ("WM_PROJECT_DIR", "FOAM_SIGFPE"):
+                if var in self.env:
+                    mpi += ["-x", var]
+            cmd = mpi + cmd + ["-parallel"]
+        t0 = time.perf_counter()
+        with open(self.logs / f"log.{log}", "w") as fh:
+            fh.write(f"# {' '.join(cmd)}\n")
+            fh.flush()
+            try:
+                r = subprocess.run(cmd, cwd=self.case, env=self.env, stdout=fh, stderr=subprocess.STDOUT,
+                                   timeout=self.timeout)
+            except subprocess.TimeoutExpired:
+                r = subprocess.CompletedProcess(cmd, returncode=-9)
+                fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
+        self.timings[log] = round(self.timings.get(log, 0.0) + time.perf_counter() - t0, 3)
+        return r
+
+
+def _latest_time(case_dir: Path) -> str | None:
+    times = []
+    for p in case_dir.iterdir():
+        if p.is_dir():
+            try:
+                times.append((float(p.name), p.name))
+            except ValueError:
+                pass
+    return max(times)[1] if times else None
+
+
+def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
+    txt = log.read_text(errors="replace")
+    m = re.search(r"^\s*cells:\s+(\d+)", txt, re.M)
+    cells = int(m.group(1)) if m else None
+    if "Mesh OK." in txt:
+        return True, cells, ""
+    fails = re.findall(r"\*\*\*.*", txt)
+    m = re.search(r"Failed (\d+) mesh checks", txt)
+    why = (f"checkMesh failed {m.group(1)} check(s): " if m else "checkMesh did not report 'Mesh OK.': ") + "; ".join(
+        f.strip() for f in fails[:5])
+    return False, cells, why
+
+
+def _read_patch_vectors(field_file: Path, patch: str) -> np.ndarray | None:
+    txt = field_file.read_text(errors="replace")
+    bf = txt.find("boundaryField")
+    m = re.search(rf"\b{re.escape(patch)}\s*\{{[^{{}}]*?value\s+nonuniform\s+List<vector>\s*(\d+)\s*\(", txt[bf:], re.S)
+    if not m:
+        m2 = re.search(rf"\b{re.escape(patch)}\s*\{{[^{{}}]*?value\s+uniform\s*\(([^)]*)\)", txt[bf:], re.S)
+        return None if not m2 else np.array([[float(x) for x in m2.group(1).split()]])
+    n = int(m.group(1))
+    start = bf + m.end()
+    vals = re.findall(r"\(([^()]*)\)", txt[start:start + n * 80 + 1000])[:n]
+    return np.array([[float(x) for x in v.split()] for v in vals])
+
+
+def _write_residuals(case_dir: Path, rows: list[dict]) -> None:
+    import csv
+    keys = ["iteration", "p", "U", "cont_local", "cont_global", "cont_cumulative"]
+    with open(case_dir / "residuals.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for r in rows:
+            w.writerow([r.get("time") if k == "iteration" else r.get(k, "") for k in keys])
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, ax = plt.subplots(figsize=(6, 4))
+        it = [r["time"] for r in rows]
+        for k in ("p", "U"):
+            ax.semilogy(it, [r.get(k, np.nan) for r in rows], label=k)
+        ax.set_xlabel("SIMPLE iteration")
+        ax.set_ylabel("initial residual")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(case_dir / "residuals.png", dpi=100)
+        plt.close(fig)
+    except Exception:  # plotting must never fail a run
+        pass
+
+
+def _use_means(time_dir: Path) -> None:
+    """Fallback: replace U and p by their fieldAverage means (instantaneous kept as *.instantaneous)."""
+    for f in ("U", "p"):
+        mean = time_dir / f"{f}Mean"
+        if mean.exists():
+            shutil.move(time_dir / f, time_dir / f"{f}.instantaneous")
+            txt = mean.read_text()
+            txt = re.sub(rf"(object\s+){f}Mean;", rf"\1{f};", txt, count=1)
+            (time_dir / f).write_text(txt)
+
+
+def run_case(case_dir, *, ranks: int | None = None) -> dict:
+    """Mesh and solve a rendered case; writes ``status.json``, ``residuals.csv/png``, ``logs/log.*``.
+
+    Steps: blockMesh, snappyHexMesh -overwrite, checkMesh (failure stops), inlet profile,
+    [decomposePar], simpleFoam start-up (first order) then main stage (residualControl);
+    if not converged and solver.fallback == 'average': averaging stage with fieldAverage whose
+    means replace U and p; [reconstructPar]; wallShearStress."""
+    case_dir = Path(case_dir).resolve()
+    state = json.loads((case_dir / CASE_JSON).read_text())
+    cfd = state["cfd"]
+    sol = cfd["solver"]
+    ranks = max(int(ranks if ranks is not None else cfd.get("ranks", 1)), 1)
+    n = [1, 1, 1]                       # hierarchical/simple: split along the longest STL extent
+    lo, hi = (np.array(b) for b in state["stl_bounds"])
+    n[int(np.argmax(hi - lo))] = ranks
+    state["decomposition_n"] = n
+    state["cfd"]["ranks"] = ranks
+    timings: dict = {}
+    installed, version = detect_openfoam()
+    status: dict = {
+        "case": str(case_dir), "flavour": state["flavour"], "openfoam_version": version, "ranks": ranks,
+        "converged": False, "criterion": f"initial residuals of p and U < {sol['tolerance']:g}",
+        "iterations": 0, "final_residuals": {}, "mass_imbalance": None, "cells": None,
+        "timings_s": timings, "reason": None, "inlet": {"type": cfd["inlet"]["type"]},
+        "units": {"p": "m2/s2 (kinematic); *_Pa = x rho", "wallShearStress": "m2/s2 (kinematic); *_Pa = x rho"},
+        "rho": cfd["physics"]["rho"], "nu": cfd["physics"]["nu"],
+    }
+
+    def finish(reason: str | None = None, failed_log: str | None = None) -> dict:
+        if reason:
+            status["reason"] = reason
+        if failed_log:  # the log of the utility that failed (absolute path), for the user and the atlas
+            status["failed_log"] = str(case_dir / "logs" / f"log.{failed_log}")
+        status["timings_s"]["total"] = round(sum(v for k, v in timings.items() if k != "total"), 3)
+        (case_dir / "status.json").write_text(json.dumps(status, indent=2, default=float))
+        return status
+
+    if installed is None:
+        return finish("no OpenFOAM installation found (simpleFoam not on PATH)")
+    if installed != state["flavour"]:
+        return finish(f"case rendered for flavour {state['flavour']!r} but the installed OpenFOAM is {installed!r}")
+
+    run = _Runner(case_dir, timings, sol.get("timeout_s"))
+    for d in case_dir.glob("processor*"):
+        shutil.rmtree(d)
+    for d in case_dir.iterdir():  # restart from a clean 0/ (re-run safety)
+        if d.is_dir() and d.name not in ("0", "constant", "system", "logs"):
+            try:
+                if float(d.name) > 0:
+                    shutil.rmtree(d)
+            except ValueError:
+                if d.name == "postProcessing":
+                    shutil.rmtree(d)
+    shutil.rmtree(case_dir / "constant" / "polyMesh", ignore_errors=True)
+    for f in (case_dir / "logs").glob("log.*"):
+        f.unlink()
+    render_files(case_dir, state, ["0/U", "0/p"])     # placeholder inlet until the mesh exists
+
+    if run(["blockMesh"], "blockMesh").returncode != 0:
+        return finish(_utility_failure(case_dir, "blockMesh"), "blockMesh")
+    if run(["snappyHexMesh", "-overwrite"], "snappyHexMesh").returncode != 0:
+        return finish(_utility_failure(case_dir, "snappyHexMesh"), "snappyHexMesh")
+    run(["checkMesh"], "checkMesh")
+    ok, cells, why = _check_mesh(case_dir / "logs" / "log.checkMesh")
+    status["cells"] = cells
+    if not ok:
+        status["mesh_ok"] = False
+        return finish(why, "checkMesh")
+    status["mesh_ok"] = True
+
+    # inlet profile on the real mesh faces, flux exact
+    t0 = time.perf_counter()
+    try:
+        prof = inlet_profile(case_dir, state)
+    except Exception as exc:  # noqa: BLE001
+        return finish(f"inlet profile: {exc}")
+    render_files(case_dir, state, ["0/U"], inlet_values=prof["values"].tolist())
+    timings["inletProfile"] = round(time.perf_counter() - t0, 3)
+    status["inlet"].update({k: v for k, v in prof.items() if k != "values"})
+
+    if ranks > 1:
+        render_files(case_dir, state, ["system/decomposeParDict"])
+        if run(["decomposePar", "-force"], "decomposePar").returncode != 0:
+            return finish(_utility_failure(case_dir, "decomposePar"), "decomposePar")
+
+    stage_files = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
+    logs = []
+    n_start = int(sol["startup_iterations"])
+    if n_start > 0:
+        render_files(case_dir, state, stage_files, end_time=n_start, div_scheme=sol["startup_scheme"],
+                residual_control=False)
+        r = run(["simpleFoam"], "simpleFoam.startup", ranks)
+        logs.append(case_dir / "logs" / "log.simpleFoam.startup")
+        if r.returncode != 0:
+            return finish(_solver_failure(logs[-1], "start-up"), "simpleFoam.startup")
+    render_files(case_dir, state, stage_files, end_time=int(sol["max_iterations"]))
+    r = run(["simpleFoam"], "simpleFoam", ranks)
+    logs.append(case_dir / "logs" / "log.simpleFoam")
+    main = parse_solver_log(logs[-1])
+    if r.returncode != 0:
+        _collect(case_dir, status, logs, state)
+        return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
+    last = main["rows"][-1] if main["rows"] else {}
+    tol = float(sol["tolerance"])
+    converged = bool(last) and (main["converged_message"] or
+                                (last.get("p", 1) < tol and last.get("U", 1) < tol))
+    status["converged"] = converged
+    averaged = False
+    if not converged:
+        status["reason"] = (f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
+                            f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})")
+        if sol.get("fallback") == "average" and int(sol["average_iterations"]) > 0:
+            status["averaging_from"] = int(last.get("time", sol["max_iterations"]))
+            end = status["averaging_from"] + int(sol["average_iterations"])
+            render_files(case_dir, state, stage_files, end_time=end, residual_control=False, average=True)
+            r = run(["simpleFoam"], "simpleFoam.average", ranks)
+            logs.append(case_dir / "logs" / "log.simpleFoam.average")
+            if r.returncode != 0:
+                _collect(case_dir, status, logs, state)
+                return finish(status["reason"] + "; " + _solver_failure(logs[-1], "averaging"), "simpleFoam.average")
+            averaged = True
+    if ranks > 1:
+        if run(["reconstructPar", "-latestTime"], "reconstructPar").returncode != 0:
+            return finish((status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed",
+                          "reconstructPar")
+    if averaged:
+        tdir = case_dir / _latest_time(case_dir)
+        _use_means(tdir)
+        run(["simpleFoam", "-postProcess", "-func", "wallShearStress", "-latestTime"], "wallShearStress")
+        status["criterion_used"] = "pseudo_steady_time_average"
+        status["average_iterations"] = int(sol["average_iterations"])
+    else:
+        status["criterion_used"] = "residualControl" if converged else "none"
+    _collect(case_dir, status, logs, state)
+    if averaged:
+        rel = status.get("averaging", {}).get("max_initial_residual")
+        status["converged_relaxed"] = bool(rel is not None and rel < float(sol["relaxed_tolerance"]))
+        status["reason"] += (f"; fallback: U and p are the time averages over the last {sol['average_iterations']} "
+                             f"iterations (pseudo-steady), max residual during averaging {rel:.3g} "
+                             f"(relaxed criterion {sol['relaxed_tolerance']:g}: "
+                             f"{'met' if status['converged_relaxed'] else 'not met'})")
+    return finish()
+
+
+def _utility_failure(case_dir: Path, utility: str) -> str:
+    """'<utility> failed: <FOAM FATAL ERROR message> (see logs/log.<utility>)'."""
+    log = case_dir / "logs" / f"log.{utility}"
+    txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
+    m = re.search(r"FOAM FATAL (?:IO )?ERROR[^\n]*\n((?:[^\n]*\n){0,8})", txt)
+    detail = ""
+    if m:  # the message lines, without the "From ..."/"in file ..." trailer
+        lines = [ln.strip() for ln in m.group(1).splitlines() if ln.strip()]
+        lines = [ln for ln in lines if not ln.startswith(("From ", "in file ", "at line ", "FOAM exiting"))]
+        detail = ": " + " ".join(" ".join(lines).split())[:300] if lines else ""
+    elif "# vcsflow: timeout" in txt:
+        detail = ": timeout"
+    return f"{utility} failed{detail} (see logs/log.{utility})"
+
+
+def _solver_failure(log: Path, stage: str) -> str:
+    txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
+    m = re.search(r"(FOAM FATAL[^\n]*\n(?:[^\n]*\n){0,6})", txt)
+    if "Floating point exception" in txt or "sigFpe" in txt:
+        return f"simpleFoam ({stage}) diverged: floating point exception (see logs/{log.name})"
+    if m:
+        return f"simpleFoam ({stage}) failed: " + " ".join(m.group(1).split())[:400]
+    return f"simpleFoam ({stage}) exited with an error (see logs/{log.name})"
+
+
+def _pyfoam_check(log: Path) -> dict | None:
+    """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration)."""
+    try:
+        from PyFoam.LogAnalysis.BoundingLogAnalyzer import BoundingLogAnalyzer
+        a = BoundingLogAnalyzer(doFiles=False, doTimelines=True)
+        with open(log) as fh:
+            a.analyze(fh)
+        lin = a.getAnalyzer("Linear").getCurrentData()
+        cont = a.getAnalyzer("Continuity").getCurrentData()
+        return {"log": log.name, "last_iteration": float(a.getTime()),
+                "initial_residuals": {k: v for k, v in lin.items() if "_" not in k},
+                "continuity": cont}
+    except Exception as exc:  # noqa: BLE001 - optional cross-check only
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def _collect(case_dir: Path, status: dict, logs: list[Path], state: dict) -> None:
+    rows: list[dict] = []
+    stage_iters = {}
+    for lg in logs:
+        if lg.exists():
+            parsed = parse_solver_log(lg)
+            rows += parsed["rows"]
+            stage_iters[lg.name.replace("log.", "")] = len(parsed["rows"])
+    status["stage_iterations"] = stage_iters
+    if rows:
+        _write_residuals(case_dir, rows)
+        last = rows[-1]
+        status["iterations"] = int(last["time"])
+        status["final_residuals"] = {k: last[k] for k in ("p", "U") if k in last}
+        status["continuity_errors"] = {k.replace("cont_", ""): last[k] for k in
+                                       ("cont_local", "cont_global", "cont_cumulative") if k in last}
+        if logs and logs[-1].name.endswith(".average"):
+            avg_rows = parse_solver_log(logs[-1])["rows"]
+            status["averaging"] = {"max_initial_residual": float(max(max(r.get("p", 0), r.get("U", 0)) for r in avg_rows))
+                                   if avg_rows else None}
+    status["pyfoam_log_analysis"] = _pyfoam_check(logs[-1]) if logs else None
+    rho = float(state["cfd"]["physics"]["rho"])
+    avg_from = status.get("averaging_from")
+
+    def fo_value(name: str):
+        # fallback: mean over the averaging window (consistent with UMean/pMean); else last iteration
+        if avg_from is not None:
+            return mean_function_value(case_dir, name, avg_from)
+        return last_function_value(case_dir, name)
+
+    flows = {}
+    for p in state["patches"]:
+        if p["role"] in ("inlet", "outlet"):
+            flows[p["name"]] = fo_value(f"flowRate_{p['name']}")
+    status["flow_rates"] = flows
+    q_in = sum(v for k, v in flows.items() if v is not None and patch_role(k) == "inlet")
+    q_out = sum(v for k, v in flows.items() if v is not None and patch_role(k) == "outlet")
+    if q_in:
+        status["mass_imbalance"] = abs(q_in + q_out) / abs(q_in)
+    pin = {p["name"]: fo_value(f"pressure_{p['name']}") for p in state["patches"]
+           if p["role"] in ("inlet", "outlet")}
+    status["patch_pressure"] = pin
+    pi = [v for k, v in pin.items() if patch_role(k) == "inlet" and v is not None]
+    po = [v for k, v in pin.items() if patch_role(k) == "outlet" and v is not None]
+    if pi and po:
+        dp = pi[0] - float(np.mean(po))
+        status["pressure_drop"] = {"kinematic_m2s2": dp, "Pa": dp * rho}
+    latest = _latest_time(case_dir)
+    if latest and float(latest) > 0:
+        wss_file = case_dir / latest / "wallShearStress"
+        walls = [p["name"] for p in state["patches"] if p["role"] == "wall"]
+        if wss_file.exists() and walls:
+            try:
+                vals, areas = [], []
+                for w in walls:
+                    v = _read_patch_vectors(wss_file, w)
+                    _, sf = patch_geometry(case_dir, w)
+                    a = np.linalg.norm(sf, axis=1)
+                    if v is not None and len(v) == 1:
+                        v = np.repeat(v, len(a), 0)
+                    if v is not None and len(v) == len(a):
+                        vals.append(np.linalg.norm(v, axis=1))
+                        areas.append(a)
+                if vals:
+                    mag, a = np.concatenate(vals), np.concatenate(areas)
+                    status["wall_shear_stress_Pa"] = {"mean": float((mag * a).sum() / a.sum() * rho),
+                                                      "max": float(mag.max() * rho), "min": float(mag.min() * rho)}
+            except Exception as exc:  # noqa: BLE001
+                status["wall_shear_stress_Pa"] = {"error": str(exc)}

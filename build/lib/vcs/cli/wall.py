@@ -1,0 +1,104 @@
+"""`vcs wall` and `vcs grid`: the model wall (Eq. 8) as a closed STL, the measurement grid as VTU."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from vcs.cli._args import int_at_least, not_an_input, positive_int
+from vcs.errors import VCSInputError
+from vcs.grid import GRID_DEFAULTS
+from vcs.io import UNIT_TO_MM
+
+
+def cmd_wall(args: argparse.Namespace) -> None:
+    """Run `vcs wall`: the model wall as a closed multi-solid STL (solids wall, inlet, outlet).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``model`` (model.json), ``output`` (.stl), ``n_tau`` (axial intervals or None: square
+        quads), ``n_theta`` (vertices around), ``extend_inlet``/``extend_outlet`` (straight
+        extensions, in diameters) and ``units`` (of the STL: mm, cm or m).
+
+    Raises
+    ------
+    VCSInputError
+        The output does not end in .stl or is the input model.
+    """
+    from vcs.surface import wall_mesh, write_multisolid_stl
+    from vcs.vessel import VesselModel
+
+    model = VesselModel.load(args.model)
+    mesh = wall_mesh(model, n_tau=args.n_tau, n_theta=args.n_theta,
+                     extend_inlet=args.extend_inlet, extend_outlet=args.extend_outlet)
+    out = not_an_input(args.output, args.model)
+    if out.suffix.lower() != ".stl":
+        raise VCSInputError(f"output '{out}' must end in .stl")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_multisolid_stl(mesh, out, scale=1.0 / UNIT_TO_MM[args.units])
+    print(f"wall (Eq. 8) with {len(mesh.faces)} triangles, solids wall/inlet/outlet, in {args.units} -> {out}")
+
+
+def cmd_grid(args: argparse.Namespace) -> None:
+    """Run `vcs grid`: the (tau, theta, rho_n) measurement grid as a hexahedral VTU.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``model`` (model.json), ``output`` (.vtu), ``n_tau``, ``n_theta``, ``n_rho`` (grid sizes),
+        ``scheme`` (cylindrical or ogrid) and ``units`` (of the VTU points: mm, cm or m). Point
+        data: ``tau``, ``theta`` (rad), ``rho_n`` (rho / rho_w, in [0, 1]).
+    """
+    import pyvista as pv
+
+    from vcs.grid import measurement_grid
+    from vcs.vessel import VesselModel
+
+    model = VesselModel.load(args.model)
+    g = measurement_grid(model, n_tau=args.n_tau, n_theta=args.n_theta, n_rho=args.n_rho, scheme=args.scheme)
+    cells = np.hstack([np.full((len(g.cells), 1), 8), g.cells]).ravel()
+    ug = pv.UnstructuredGrid(cells, np.full(len(g.cells), pv.CellType.HEXAHEDRON, np.uint8),
+                             g.points / UNIT_TO_MM[args.units])
+    ug.point_data["tau"] = g.tau
+    ug.point_data["theta"] = g.theta
+    ug.point_data["rho_n"] = g.rho_n
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    ug.save(str(out))
+    print(f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, "
+          f"{ug.n_cells} cells -> {out}")
+
+
+def add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Register `vcs wall` and `vcs grid` on the subparsers object of the `vcs` parser.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        As returned by :meth:`argparse.ArgumentParser.add_subparsers`.
+    """
+    w = subparsers.add_parser("wall", help="write the model wall (Eq. 8) as a closed multi-solid STL")
+    w.add_argument("model", help="model.json from `vcs fit`")
+    w.add_argument("-o", "--output", required=True, help="output .stl")
+    w.add_argument("--n-tau", type=positive_int, default=None, help="axial intervals (default: square quads)")
+    w.add_argument("--n-theta", type=positive_int, default=64, help="vertices around the circumference")
+    w.add_argument("--extend-inlet", type=float, default=0.0, help="straight inlet extension, in diameters")
+    w.add_argument("--extend-outlet", type=float, default=0.0, help="straight outlet extension, in diameters")
+    w.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the STL (OpenFOAM: m)")
+    w.set_defaults(func=cmd_wall)
+
+    g = subparsers.add_parser("grid", help="write the (tau, theta, rho_n) measurement grid as VTU")
+    g.add_argument("model", help="model.json from `vcs fit`")
+    g.add_argument("-o", "--output", required=True, help="output .vtu")
+    g.add_argument("--n-tau", type=int_at_least(2), default=GRID_DEFAULTS["n_tau"],
+                   help="nodes along tau, both ends included (as grid.n_tau of the workflow)")
+    g.add_argument("--n-theta", type=int_at_least(4), default=GRID_DEFAULTS["n_theta"],
+                   help="nodes around theta (as grid.n_theta)")
+    g.add_argument("--n-rho", type=int_at_least(2), default=GRID_DEFAULTS["n_rho"],
+                   help="nodes from the axis to the wall, both included (as grid.n_rho)")
+    g.add_argument("--scheme", default="cylindrical", choices=["cylindrical", "ogrid"],
+                   help="cylindrical: the paper's grid, the nodes of fields.npz; ogrid: Cartesian core (visual)")
+    g.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the VTU points")
+    g.set_defaults(func=cmd_grid)

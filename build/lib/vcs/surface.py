@@ -1,0 +1,148 @@
+"""The model's wall as a closed triangle mesh (paper Eq. 8).
+
+x(tau, theta) = c(tau) + rho_w(tau, theta) (v1(tau) cos theta + v2(tau) sin theta) on a regular
+tau-theta grid, optional straight flow extensions, flat caps; multi-solid STL for snappyHexMesh.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from vcs.errors import VCSInputError
+from vcs.mesh import orient_outward, write_stl_ascii
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class WallMesh:
+    """Closed, outward-oriented triangle mesh: (N, 3) vertices (mm), (M, 3) faces and the solid
+    (0 wall, 1 inlet, 2 outlet) of each face."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    solid: np.ndarray
+
+    SOLIDS = ("wall", "inlet", "outlet")
+
+
+def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
+    """Two triangles per quad of a (n_rows, n_theta) periodic-in-theta vertex grid."""
+    idx = np.arange(n_rows * n_theta).reshape(n_rows, n_theta) + offset
+    a, b = idx[:-1], idx[1:]
+    a2, b2 = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
+    t1 = np.stack([a, a2, b2], -1).reshape(-1, 3)
+    t2 = np.stack([a, b2, b], -1).reshape(-1, 3)
+    return np.concatenate([t1, t2])
+
+
+def _cap(ring: np.ndarray, center: np.ndarray, normal: np.ndarray, offset: int):
+    """Triangulate a flat, star-shaped cap bounded by ``ring`` (n, 3) with near-equilateral
+    triangles: interior points on a hexagonal lattice + Delaunay, boundary edges kept as given."""
+    n = len(ring)
+    e1 = ring[0] - center
+    e1 -= (e1 @ normal) * normal
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    b2 = np.column_stack([(ring - center) @ e1, (ring - center) @ e2])
+    spacing = np.linalg.norm(np.diff(np.vstack([b2, b2[:1]]), axis=0), axis=1).mean()
+    r_max = np.linalg.norm(b2, axis=1).max()
+    m = int(np.ceil(r_max / spacing)) + 1
+    i, j = np.meshgrid(np.arange(-m, m + 1), np.arange(-m, m + 1), indexing="ij")
+    lat = np.column_stack([(i + 0.5 * j).ravel() * spacing, (j * np.sqrt(3) / 2).ravel() * spacing])
+    # keep lattice points well inside the boundary (star-shaped: compare radii at the same angle)
+    ang_b = np.arctan2(b2[:, 1], b2[:, 0])
+    order = np.argsort(ang_b)
+    ang_s = np.concatenate([ang_b[order] - TWO_PI, ang_b[order], ang_b[order] + TWO_PI])
+    rad_s = np.tile(np.linalg.norm(b2, axis=1)[order], 3)
+    r_lat = np.linalg.norm(lat, axis=1)
+    r_bnd = np.interp(np.arctan2(lat[:, 1], lat[:, 0]), ang_s, rad_s)
+    lat = lat[r_lat < r_bnd - 0.7 * spacing]
+    pts2 = np.vstack([b2, lat])
+    tri = Delaunay(pts2).simplices
+    # drop triangles outside the boundary polygon (centroid radius beyond the boundary)
+    cen = pts2[tri].mean(axis=1)
+    r_c = np.linalg.norm(cen, axis=1)
+    inside = r_c < np.interp(np.arctan2(cen[:, 1], cen[:, 0]), ang_s, rad_s)
+    tri = tri[inside]
+    # all boundary edges must be present, otherwise the cap is not watertight
+    bedges = {tuple(sorted((k, (k + 1) % n))) for k in range(n)}
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    present = {tuple(x) for x in e.tolist()}
+    if not bedges <= present:
+        raise VCSInputError("could not triangulate a flat cap of the wall; increase --n-theta or check the model")
+    verts3 = center + lat[:, :1] * e1 + lat[:, 1:] * e2
+    idx = np.where(tri < n, tri + offset[0], tri - n + offset[1])
+    return verts3, idx
+
+
+def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
+              extend_inlet: float = 0.0, extend_outlet: float = 0.0) -> WallMesh:
+    """Eq. 8 wall on a regular tau-theta grid, closed by flat caps, outward-oriented.
+
+    Parameters
+    ----------
+    model : VesselModel (with a wall model)
+    n_tau : number of tau intervals; default gives square quads (axial step = mean arc step).
+    n_theta : vertices around the circumference.
+    extend_inlet, extend_outlet : straight flow extensions, in diameters of the end section,
+        along -t(0) and +t(1), keeping the end cross-section shape.
+    """
+    if model.wall is None:
+        raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
+    if n_theta < 8:
+        raise VCSInputError(f"--n-theta {n_theta} is too small; use at least 8")
+    if n_tau is not None and n_tau < 1:
+        raise VCSInputError(f"--n-tau {n_tau} must be at least 1")
+    vcs = model.vcs
+    theta = np.linspace(0, TWO_PI, n_theta, endpoint=False)
+    r_mean = float(model.wall(np.linspace(0, 1, 50)[:, None], theta[None, :]).mean())
+    if r_mean <= 0:
+        raise VCSInputError("the wall model has a non-positive mean radius; refit the model")
+    step = TWO_PI * r_mean / n_theta
+    if n_tau is None:
+        n_tau = max(4, int(round(vcs.length / step)))
+    tau = np.linspace(0, 1, n_tau + 1)
+    main = model.surface_points(tau[:, None], theta[None, :])
+    ends = []
+    for tau_e, ext, sign in ((0.0, extend_inlet, -1.0), (1.0, extend_outlet, 1.0)):
+        t, v1, v2 = vcs.frame(np.array([tau_e]))
+        rw = model.wall(np.full(n_theta, tau_e), theta)
+        section = vcs.curve(tau_e) + rw[:, None] * (np.cos(theta)[:, None] * v1 + np.sin(theta)[:, None] * v2)
+        length = ext * 2.0 * rw.mean()
+        n_ext = int(round(length / step)) if ext > 0 else 0
+        s = np.linspace(0, length, n_ext + 1)[1:]
+        ends.append((section, t[0] * sign, s))
+    (sec0, d0, s0), (sec1, d1, s1) = ends
+    ext_in = sec0[None] + s0[::-1, None, None] * d0[None, None]  # farthest first
+    ext_out = sec1[None] + s1[:, None, None] * d1[None, None]
+    grid = np.concatenate([ext_in, main, ext_out], axis=0)
+    n_rows = len(grid)
+    verts = grid.reshape(-1, 3)
+    faces = _grid_faces(n_rows, n_theta)
+    solid = np.zeros(len(faces), np.int8)
+    all_v, all_f, all_s = [verts], [faces], [solid]
+    n_v = len(verts)
+    for k, (row, d) in enumerate(((0, d0), (n_rows - 1, d1))):
+        ring = grid[row]
+        s_end = (s0 if k == 0 else s1)
+        center = vcs.curve(float(k)) + (s_end[-1] if len(s_end) else 0.0) * d
+        v_cap, f_cap = _cap(ring, center, d, (row * n_theta, n_v))
+        all_v.append(v_cap)
+        all_f.append(f_cap)
+        all_s.append(np.full(len(f_cap), k + 1, np.int8))
+        n_v += len(v_cap)
+    V = np.concatenate(all_v)
+    F = np.concatenate(all_f)
+    S = np.concatenate(all_s)
+    F = orient_outward(V, F)
+    return WallMesh(V, F, S)
+
+
+def write_multisolid_stl(mesh: WallMesh, path, scale: float = 1.0) -> None:
+    """ASCII STL with one solid per patch name (what snappyHexMesh needs for patch names);
+    coordinates multiplied by ``scale`` (e.g. 1e-3: mm -> m)."""
+    V = mesh.vertices * scale
+    write_stl_ascii(path, {name: V[mesh.faces[mesh.solid == k]] for k, name in enumerate(WallMesh.SOLIDS)})

@@ -1,0 +1,59 @@
+"""The wheel built by `pip wheel .` is complete: it holds the OpenFOAM templates, and a case renders
+from a non-editable install of it (no source tree on the path)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("wheel")
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(REPO), "-w", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    (whl,) = out.glob("vcs_atlas-*.whl")
+    return whl
+
+
+def test_wheel_contains_templates_and_every_package(wheel):
+    names = set(zipfile.ZipFile(wheel).namelist())
+    templates = sorted(p.relative_to(REPO / "templates" / "openfoam").as_posix()
+                       for p in (REPO / "templates" / "openfoam").rglob("*") if p.is_file())
+    assert templates, "no templates in the source tree"
+    missing = [t for t in templates if f"vcs/cfd/templates/openfoam/{t}" not in names]
+    assert not missing, f"templates missing from the wheel: {missing}"
+    packages = sorted(p.parent.relative_to(REPO).as_posix() for p in (REPO / "vcs").rglob("__init__.py"))
+    assert all(f"{p}/__init__.py" in names for p in packages), packages
+
+
+def test_case_renders_from_a_non_editable_install(wheel, tmp_path):
+    site = tmp_path / "site"
+    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    script = f"""
+import vcs, vcs.cfd.openfoam as o
+from vcs.cfd import render_case
+from vcs.phantoms.analytic import write_closed_tube_stl
+assert vcs.__file__.startswith({str(site)!r}), vcs.__file__
+assert str(o.template_dir()).startswith({str(site)!r}), o.template_dir()
+stl = write_closed_tube_stl("tube.stl", radius=0.005, length=0.05, n_theta=24, n_z=10)
+state = render_case("case", stl, {{"mesh": {{"cell_size": 1e-3}}}}, flavour="esi")
+print(sorted(state["files"]))
+"""
+    env = {"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, env=env,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    for rel in ("system/controlDict", "system/snappyHexMeshDict", "system/fvSchemes", "0/U", "0/p",
+                "constant/transportProperties"):
+        text = (tmp_path / "case" / rel).read_text()
+        assert "FoamFile" in text, rel
+    assert "locationInMesh" in (tmp_path / "case" / "system" / "snappyHexMeshDict").read_text()
