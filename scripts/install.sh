@@ -32,7 +32,12 @@ stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
 if [ ! -f "$stamp" ]; then
   echo "[install] pip install -e .[test] (pinned)"
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-  .venv/bin/python -m pip install -q -e '.[test]'
+  # the build backend's warnings go to the log; shown in full when the install fails
+  if ! .venv/bin/python -m pip install -q -e '.[test]' > .venv/pip-install.log 2>&1; then
+    cat .venv/pip-install.log >&2
+    echo "[install] error: pip install failed (log above, also in .venv/pip-install.log)" >&2
+    exit 1
+  fi
   touch "$stamp"
 fi
 echo "[install] OK: $(.venv/bin/python --version), OpenFOAM $(dpkg-query -W -f='${Version}' openfoam 2>/dev/null || echo '?')"
