@@ -231,7 +231,7 @@ def find_ends(
     if len(loop_ends) >= 3:  # small openings are holes in the wall, not ends
         radii = [cast(float, e.radius) for e in loop_ends]  # loop ends always have a radius
         r_big = max(radii)
-        holes = [r < 0.2 * r_big or _wall_on_both_sides(vertices, e) for r, e in zip(radii, loop_ends)]
+        holes = [r < 0.2 * r_big or _wall_on_both_sides(vertices, e) for r, e in zip(radii, loop_ends, strict=True)]
         if any(holes):
             warnings.append(f"{sum(holes)} small opening(s) (holes) in the wall closed for the lumen; "
                             "their rims are wall points")
@@ -244,14 +244,16 @@ def find_ends(
         if e.normal is None:
             return e
         radius = cast(float, e.radius)  # an end with a normal has a radius
-        return End(e.center, _inward(e.center, e.normal, radius, vertices[np.unique(faces[wall_mask])]), e.radius, e.source)
+        wall_vertices = vertices[np.unique(faces[wall_mask])]
+        return End(e.center, _inward(e.center, e.normal, radius, wall_vertices), e.radius, e.source)
 
     if inlet_cap is not None or outlet_cap is not None:
         if inlet_cap is None or outlet_cap is None:
             raise VCSInputError("give both --inlet-cap and --outlet-cap (or neither)")
         cap_in = _end_from_faces(*inlet_cap, "inlet cap file")
         cap_out = _end_from_faces(*outlet_cap, "outlet cap file")
-        return Ends(orient(cap_in), orient(cap_out), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes, warnings)
+        return Ends(orient(cap_in), orient(cap_out), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes,
+                    warnings)
 
     for cands, method in ((cap_ends, "labelled_caps"), (loop_ends, "open_loops")):
         if len(cands) < 2:

@@ -270,8 +270,9 @@ def _cylindrical_cells(n_tau: int, n_theta: int, n_rho: int) -> NDArray[np.integ
     return np.concatenate([quad[:-1], quad[1:]], axis=-1).reshape(-1, 8)
 
 
-def measurement_grid(model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
-                     n_rho: int = GRID_DEFAULTS["n_rho"], scheme: str = "cylindrical") -> MeasurementGrid:
+def measurement_grid(model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
+                     n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"],
+                     scheme: str = "cylindrical") -> MeasurementGrid:
     """The measurement grid of a vessel model with hexahedral cells (paper Section 2.4.2).
 
     Parameters

@@ -210,10 +210,10 @@ def mls_interpolate(points: np.ndarray, data_points: np.ndarray, values: np.ndar
     return out[:, 0] if squeeze else out
 
 
-def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
-                n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3,
-                rho_density: float = 1060.0, method: str = "mls", wall_patch: str = "wall",
-                wss_name: str = "wallShearStress") -> dict[str, Any]:
+def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: VesselModel, *,
+                n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
+                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
+                method: str = "mls", wall_patch: str = "wall", wss_name: str = "wallShearStress") -> dict[str, Any]:
     """Sample U, p (internal mesh) and WSS (wall patch) on the model's grid; see the module doc.
 
     Parameters
@@ -337,9 +337,10 @@ def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: Ve
     return out
 
 
-def sample_case(case_dir: Path | str, model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
-                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
-                time: float | None = None, method: str = "mls") -> dict[str, Any]:
+def sample_case(case_dir: Path | str, model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
+                n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"],
+                rho_scale: float = 1e-3, rho_density: float = 1060.0, time: float | None = None,
+                method: str = "mls") -> dict[str, Any]:
     """Sample a finished OpenFOAM case on the patient's (tau, theta, rho_n) grid (Section 2.4.2).
 
     Parameters
