@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -743,7 +744,7 @@ def recentre(curve: BSpline, vertices: NDArray[np.floating], wall_faces: NDArray
     """
     tri = vertices[wall_faces]
     area = 0.5 * np.linalg.norm(triangle_cross(tri), axis=1)
-    w_vert = np.bincount(wall_faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices))
+    w_vert = cast(NDArray[np.floating], np.bincount(wall_faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices)))
     used = w_vert > 0
     p0, p1 = curve.c[0], curve.c[-1]
     n_knots = len(curve.t) - 2 * (curve.k + 1)

@@ -76,13 +76,14 @@ def initial_v1(t0: ArrayLike, c0: ArrayLike, wall_centroid: ArrayLike) -> tuple[
     how : str
         "wall centroid" or "fallback: least-aligned coordinate axis (centroid on the tangent)".
     """
-    t0 = t0 / np.linalg.norm(t0)
+    t = np.asarray(t0, float)
+    t = t / np.linalg.norm(t)
     d = np.asarray(wall_centroid, float) - c0
-    p = d - (d @ t0) * t0
-    if np.linalg.norm(p) > 1e-9 * max(np.linalg.norm(d), 1e-300):
+    p = d - (d @ t) * t
+    if np.linalg.norm(p) > 1e-9 * max(float(np.linalg.norm(d)), 1e-300):
         return p / np.linalg.norm(p), "wall centroid"
-    axis = np.eye(3)[int(np.argmin(np.abs(t0)))]
-    p = axis - (axis @ t0) * t0
+    axis = np.eye(3)[int(np.argmin(np.abs(t)))]
+    p = axis - (axis @ t) * t
     return p / np.linalg.norm(p), "fallback: least-aligned coordinate axis (centroid on the tangent)"
 
 
@@ -165,9 +166,9 @@ class ParallelTransportFrame:
         -------
         t, v1, v2 : three (n, 3) float
         """
-        tau = np.clip(np.asarray(tau, float), 0.0, 1.0)
-        t = self.tangent(tau)
-        x = tau * (self.n - 1)
+        tc = np.clip(np.asarray(tau, float), 0.0, 1.0)
+        t = self.tangent(tc)
+        x = tc * (self.n - 1)
         i = np.minimum(x.astype(np.int64), self.n - 2)
         f = (x - i)[..., None]
         v = (1 - f) * self.v1_table[i] + f * self.v1_table[i + 1]
