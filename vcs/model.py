@@ -128,6 +128,7 @@ class VesselCoordinateSystem:
         v1_0, how = initial_v1_from_wall(curve, wall_centroid(vertices, wall_faces))
         self = cls(curve, v1_0, v1_0_from=how)
         t_frame = time.perf_counter()
+        # "astar": the lumen path search (key kept from the former A* implementation)
         timings = {"voxelize": t_vox - t0, "astar": t_path - t_vox, "spline_fit": t_fit - t_path,
                    "recentre": t_recentre - t_fit, "frame": t_frame - t_recentre}
         self.report = _build_report(self, ends, inlet, outlet, lumen, path, shifts, timings)
