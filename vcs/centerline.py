@@ -342,10 +342,11 @@ def lowest_cost_path(lumen: VoxelLumen, start: ArrayLike, goal: ArrayLike) -> ND
     distance d; 1 to 5 tied steps on 10 of the 11 paths of scripts/same_results.py). They are
     broken as the earlier A* implementation did, so that paths stay bit-identical: the
     predecessor an A* search with heuristic |x - x_goal| / max(d) would have expanded first,
-    i.e. the smallest (g_u + heuristic_u, g_u, flat index u). A plain shortest-path tie rule
-    (scipy's Dijkstra predecessors, scikit-image's MCP_Geometric) gives paths of the same cost
-    that differ on the helix and torus phantoms (and MCP_Geometric, which rounds the step cost
-    differently, on two more meshes).
+    i.e. the smallest (g_u + heuristic_u, g_u, flat index u). Without this rule the paths have
+    the same cost but differ: scipy's own Dijkstra predecessors on the helix and torus
+    phantoms; scikit-image's ``MCP_Geometric`` (which also rounds the step cost differently,
+    length x 0.5 x (c_a + c_b)) on those two and on AortaCFD (unit sampling) or the capped
+    SimVascular segment (sampling h).
 
     Parameters
     ----------
