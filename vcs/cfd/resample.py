@@ -37,7 +37,6 @@ from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
 from vcs.grid import GRID_DEFAULTS, grid_points, grid_to_vtk, local_frame, grid_axes, to_vcs_components
-from vcs.grid import from_vcs_components as from_vcs_components  # re-exported, as vcs.resample did
 
 if TYPE_CHECKING:
     import pyvista as pv

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
 from vcs.mesh import boundary_loops, edge_topology, polygon_properties, triangle_areas, triangle_cross
@@ -20,34 +22,66 @@ CAP_ARRAY_NAMES = ("ModelFaceID", "CapID", "FaceID", "face_id", "RegionId")
 
 @dataclass(frozen=True)
 class End:
-    """One end of the section.
+    """One end of the section: the centre and normal of its end plane (paper Section 2.2.1).
 
-    center : (3,) float, mm.  normal : (3,) unit vector into the lumen, or None when unknown
-    (an explicit point on a closed surface).  radius : equivalent radius sqrt(area / pi), or None.
+    Attributes
+    ----------
+    center : (3,) float, mm
+        Area centroid of the opening or cap (p_A or p_B), or the given point.
+    normal : (3,) float or None
+        Unit normal of the end plane pointing into the lumen; None when unknown (an explicit
+        point on a closed surface).
+    radius : float or None, mm
+        Equivalent radius sqrt(area / pi) of the opening; None for an explicit point.
+    source : str
+        How the end was found (e.g. ``"open loop (64 edges)"``, ``"ModelFaceID=2"``, ``"point"``).
     """
 
-    center: np.ndarray
-    normal: np.ndarray | None
+    center: NDArray[np.floating]
+    normal: NDArray[np.floating] | None
     radius: float | None
     source: str
 
 
 @dataclass(frozen=True)
 class Ends:
-    """Both ends, how they were found, and the closed surface used to voxelise the lumen."""
+    """Both ends, how they were found, and the closed surface used to voxelise the lumen.
+
+    Attributes
+    ----------
+    inlet : End
+        The end at tau = 0.
+    outlet : End
+        The end at tau = 1.
+    method : str
+        ``"open_loops"``, ``"labelled_caps"``, ``"cap_files"`` or ``"points"``.
+    wall_mask : (M,) bool
+        Faces of the input that belong to the wall (not to labelled caps).
+    closed_vertices : (N', 3) float, mm
+        The input vertices plus one centre vertex per closed boundary loop.
+    closed_faces : (M', 3) int
+        The input faces plus triangle fans closing every boundary loop.
+    n_open_loops : int
+        Number of boundary loops of the input.
+    notes : list of str
+        What was decided, for the report.
+    warnings : list of str
+        Mesh problems found (non-manifold edges, holes).
+    """
 
     inlet: End
     outlet: End
     method: str  # "open_loops" | "labelled_caps" | "cap_files" | "points"
-    wall_mask: np.ndarray  # (M,) bool: faces of the input that belong to the wall (not caps)
-    closed_vertices: np.ndarray
-    closed_faces: np.ndarray
+    wall_mask: NDArray[np.bool_]  # (M,) bool: faces of the input that belong to the wall (not caps)
+    closed_vertices: NDArray[np.floating]
+    closed_faces: NDArray[np.integer]
     n_open_loops: int
-    notes: list = field(default_factory=list)
-    warnings: list = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
 
-def _inward(center: np.ndarray, normal: np.ndarray, radius: float, vertices: np.ndarray) -> np.ndarray:
+def _inward(center: NDArray[np.floating], normal: NDArray[np.floating], radius: float,
+            vertices: NDArray[np.floating]) -> NDArray[np.floating]:
     """Orient a plane normal at an end towards the wall vertices near that end (into the lumen)."""
     d = vertices - center
     near = np.linalg.norm(d, axis=1) < 2.0 * radius
@@ -55,17 +89,19 @@ def _inward(center: np.ndarray, normal: np.ndarray, radius: float, vertices: np.
     return normal if np.sum(side) >= 0 else -normal
 
 
-def _wall_on_both_sides(vertices: np.ndarray, e: End) -> bool:
+def _wall_on_both_sides(vertices: NDArray[np.floating], e: End) -> bool:
     """True when the wall near an opening lies on both sides of its plane: a hole in the wall
-    (an open end has the whole vessel on one side)."""
+    (an open end has the whole vessel on one side). ``e`` is an open-loop end (normal and radius set)."""
+    radius = cast(float, e.radius)  # open-loop ends always have a radius and a normal
     d = vertices - e.center
-    near = np.linalg.norm(d, axis=1) < 2.5 * e.radius
+    near = np.linalg.norm(d, axis=1) < 2.5 * radius
     side = d[near] @ e.normal
-    tol = 0.05 * e.radius
-    return min(np.mean(side > tol), np.mean(side < -tol)) > 0.1
+    tol = 0.05 * radius
+    return bool(min(np.mean(side > tol), np.mean(side < -tol)) > 0.1)
 
 
-def _fan_caps(vertices: np.ndarray, loops: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _fan_caps(vertices: NDArray[np.floating],
+              loops: list[NDArray[np.integer]]) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
     """Close every boundary loop with a triangle fan around its centroid."""
     new_v, new_f = [vertices], []
     n = len(vertices)
@@ -78,7 +114,8 @@ def _fan_caps(vertices: np.ndarray, loops: list[np.ndarray]) -> tuple[np.ndarray
     return np.concatenate(new_v), faces
 
 
-def _end_from_faces(vertices, faces, source) -> End:
+def _end_from_faces(vertices: NDArray[np.floating], faces: NDArray[np.integer], source: str) -> End:
+    """The end of a cap given as triangles: area centroid, unit normal by the winding, equivalent radius."""
     tri = vertices[faces]
     cross = triangle_cross(tri)
     area2 = np.linalg.norm(cross, axis=1)
@@ -89,26 +126,29 @@ def _end_from_faces(vertices, faces, source) -> End:
     return End(center, normal, float(np.sqrt(area / np.pi)), source)
 
 
-def _pick(cands: list[End], point: np.ndarray | None, exclude: int | None = None) -> int:
+def _pick(cands: list[End], point: NDArray[np.floating] | None, exclude: int | None = None) -> int:
+    """Index of the candidate end nearest to ``point`` (the largest one when None), ``exclude`` skipped."""
     idx = [i for i in range(len(cands)) if i != exclude]
     if point is None:
-        return max(idx, key=lambda i: cands[i].radius)
-    return min(idx, key=lambda i: np.linalg.norm(cands[i].center - point))
+        return max(idx, key=lambda i: cast(float, cands[i].radius))  # loop and cap ends have a radius
+    return min(idx, key=lambda i: float(np.linalg.norm(cands[i].center - point)))
 
 
-def _near_any(point, cands: list[End]) -> bool:
-    return any(np.linalg.norm(c.center - point) <= max(2.0 * c.radius, 5.0) for c in cands)
+def _near_any(point: NDArray[np.floating], cands: list[End]) -> bool:
+    """True when ``point`` lies within max(2 r, 5 mm) of the centre of one of the candidate ends."""
+    # candidates are loop or cap ends, which always have a radius
+    return any(np.linalg.norm(c.center - point) <= max(2.0 * cast(float, c.radius), 5.0) for c in cands)
 
 
 def find_ends(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    cell_data: dict | None = None,
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    cell_data: dict[str, NDArray[Any]] | None = None,
     *,
-    inlet: np.ndarray | None = None,
-    outlet: np.ndarray | None = None,
-    inlet_cap: tuple[np.ndarray, np.ndarray] | None = None,
-    outlet_cap: tuple[np.ndarray, np.ndarray] | None = None,
+    inlet: ArrayLike | None = None,
+    outlet: ArrayLike | None = None,
+    inlet_cap: tuple[NDArray[np.floating], NDArray[np.integer]] | None = None,
+    outlet_cap: tuple[NDArray[np.floating], NDArray[np.integer]] | None = None,
     cap_array: str | None = "auto",
 ) -> Ends:
     """Decide the section's two ends (paper Section 2.2.1) and close the lumen for voxelisation.
@@ -118,6 +158,32 @@ def find_ends(
     boundary loops, explicit points. With open loops or labelled caps, ``inlet``/``outlet``
     points select the nearest end (needed when there are more than two); by default the larger
     end is the inlet (tau = 0). Points far from any loop are used as explicit end points.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float, mm
+        Surface vertices.
+    faces : (M, 3) int
+        Surface triangles.
+    cell_data : dict of str -> (M,) array, optional
+        Cell arrays of the surface (searched for cap labels).
+    inlet, outlet : (3,) float, mm, optional
+        Points at or near the inlet (tau = 0) and outlet (tau = 1).
+    inlet_cap, outlet_cap : ((P, 3) float mm, (Q, 3) int), optional
+        Cap surfaces; give both or neither.
+    cap_array : str or None
+        Name of the cell array labelling the caps; ``"auto"`` tries :data:`CAP_ARRAY_NAMES`,
+        None skips labelled caps.
+
+    Returns
+    -------
+    Ends
+
+    Raises
+    ------
+    VCSInputError
+        When the ends cannot be decided (closed surface without points, more than two openings
+        and no points, only one cap file, an unknown ``cap_array``).
     """
     cell_data = cell_data or {}
     inlet = None if inlet is None else np.asarray(inlet, float)
@@ -163,8 +229,9 @@ def find_ends(
         c, n, a = polygon_properties(vertices[loop])
         loop_ends.append(End(c, n, float(np.sqrt(a / np.pi)), f"open loop ({len(loop)} edges)"))
     if len(loop_ends) >= 3:  # small openings are holes in the wall, not ends
-        r_big = max(e.radius for e in loop_ends)
-        holes = [e.radius < 0.2 * r_big or _wall_on_both_sides(vertices, e) for e in loop_ends]
+        radii = [cast(float, e.radius) for e in loop_ends]  # loop ends always have a radius
+        r_big = max(radii)
+        holes = [r < 0.2 * r_big or _wall_on_both_sides(vertices, e) for r, e in zip(radii, loop_ends, strict=True)]
         if any(holes):
             warnings.append(f"{sum(holes)} small opening(s) (holes) in the wall closed for the lumen; "
                             "their rims are wall points")
@@ -173,16 +240,20 @@ def find_ends(
     closed_f = np.concatenate([faces, cap_f])
 
     def orient(e: End) -> End:
+        """``e`` with its normal turned into the lumen (unchanged without a normal)."""
         if e.normal is None:
             return e
-        return End(e.center, _inward(e.center, e.normal, e.radius, vertices[np.unique(faces[wall_mask])]), e.radius, e.source)
+        radius = cast(float, e.radius)  # an end with a normal has a radius
+        wall_vertices = vertices[np.unique(faces[wall_mask])]
+        return End(e.center, _inward(e.center, e.normal, radius, wall_vertices), e.radius, e.source)
 
     if inlet_cap is not None or outlet_cap is not None:
         if inlet_cap is None or outlet_cap is None:
             raise VCSInputError("give both --inlet-cap and --outlet-cap (or neither)")
-        a = _end_from_faces(*inlet_cap, "inlet cap file")
-        b = _end_from_faces(*outlet_cap, "outlet cap file")
-        return Ends(orient(a), orient(b), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes, warnings)
+        cap_in = _end_from_faces(*inlet_cap, "inlet cap file")
+        cap_out = _end_from_faces(*outlet_cap, "outlet cap file")
+        return Ends(orient(cap_in), orient(cap_out), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes,
+                    warnings)
 
     for cands, method in ((cap_ends, "labelled_caps"), (loop_ends, "open_loops")):
         if len(cands) < 2:

@@ -15,10 +15,17 @@ it through a model, :func:`measurement_grid` adds hexahedral cells for ``vcs gri
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
+
+if TYPE_CHECKING:
+    import pyvista as pv
+
+    from vcs.vessel import VesselModel
 
 TWO_PI = 2.0 * np.pi
 GRID_DEFAULTS = {"n_tau": 64, "n_theta": 32, "n_rho": 11}
@@ -27,7 +34,8 @@ GRID_DEFAULTS = {"n_tau": 64, "n_theta": 32, "n_rho": 11}
 # ---------------------------------------------------------------------------------------------
 # The measurement grid (pure numpy)
 # ---------------------------------------------------------------------------------------------
-def grid_axes(n_tau: int, n_theta: int, n_rho: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def grid_axes(n_tau: int, n_theta: int, n_rho: int) -> tuple[NDArray[np.floating], NDArray[np.floating],
+                                                             NDArray[np.floating]]:
     """The grid's node coordinates along each axis (the single grid definition of the package).
 
     Parameters
@@ -43,14 +51,42 @@ def grid_axes(n_tau: int, n_theta: int, n_rho: int) -> tuple[np.ndarray, np.ndar
         2 pi j / n_theta (2 pi itself is not repeated).
     rho_n : (n_rho,) float
         Uniform on [0, 1]: the axis (0) and the wall (1) included.
+
+    Raises
+    ------
+    VCSInputError
+        When a count is below 2.
     """
     if min(n_tau, n_theta, n_rho) < 2:
         raise VCSInputError(f"the grid needs n_tau, n_theta, n_rho >= 2, got {n_tau}, {n_theta}, {n_rho}")
     return np.linspace(0.0, 1.0, n_tau), TWO_PI * np.arange(n_theta) / n_theta, np.linspace(0.0, 1.0, n_rho)
 
 
-def grid_points(model, tau, theta, rho_n) -> tuple[np.ndarray, np.ndarray]:
-    """Grid points (n_tau, n_theta, n_rho, 3) in mm and rho_w (n_tau, n_theta) in mm."""
+def grid_points(model: VesselModel, tau: ArrayLike, theta: ArrayLike,
+                rho_n: ArrayLike) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """Map the grid axes through a model: x = c(tau) + rho_n rho_w (v1 cos theta + v2 sin theta) (Eq. 8 scaled).
+
+    Parameters
+    ----------
+    model : VesselModel
+        With a wall model; lengths in mm.
+    tau : (n_tau,) float
+        Normalised arc length in [0, 1].
+    theta : (n_theta,) float, rad
+    rho_n : (n_rho,) float
+        Radius as a fraction of rho_w (0 axis, 1 wall).
+
+    Returns
+    -------
+    points : (n_tau, n_theta, n_rho, 3) float, mm
+    rho_w : (n_tau, n_theta) float, mm
+        The wall radius rho_w(tau, theta) (Eq. 5).
+
+    Raises
+    ------
+    VCSInputError
+        When the model has no wall model.
+    """
     if model.wall is None:
         raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
     T, TH = np.meshgrid(tau, theta, indexing="ij")
@@ -60,8 +96,24 @@ def grid_points(model, tau, theta, rho_n) -> tuple[np.ndarray, np.ndarray]:
     return pts, rho_w
 
 
-def local_frame(model, tau, theta) -> np.ndarray:
-    """(n_tau, n_theta, 3, 3): rows e_t, e_theta, e_rho of the VCS frame at each (tau, theta)."""
+def local_frame(model: VesselModel, tau: ArrayLike, theta: ArrayLike) -> NDArray[np.floating]:
+    """The local VCS frame (e_t, e_theta, e_rho) at each (tau, theta) of a grid.
+
+    e_t = t(tau), e_theta = -v1 sin theta + v2 cos theta, e_rho = v1 cos theta + v2 sin theta
+    (the unit vectors of Eq. 1's cylindrical coordinates).
+
+    Parameters
+    ----------
+    model : VesselModel
+    tau : (n_tau,) float
+        Normalised arc length in [0, 1].
+    theta : (n_theta,) float, rad
+
+    Returns
+    -------
+    (n_tau, n_theta, 3, 3) float
+        Rows e_t, e_theta, e_rho (unit vectors, dimensionless).
+    """
     t, v1, v2 = model.vcs.frame(np.asarray(tau, float))
     c, s = np.cos(theta)[None, :, None], np.sin(theta)[None, :, None]
     t, v1, v2 = t[:, None, :], v1[:, None, :], v2[:, None, :]
@@ -70,25 +122,66 @@ def local_frame(model, tau, theta) -> np.ndarray:
     return np.stack(np.broadcast_arrays(t, e_th, e_rho), axis=-2)
 
 
-def to_vcs_components(vectors: np.ndarray, frame: np.ndarray) -> np.ndarray:
-    """Cartesian vectors (n_tau, n_theta, [n_rho,] 3) -> (u_t, u_theta, u_rho) in the local frame."""
+def to_vcs_components(vectors: NDArray[np.floating], frame: NDArray[np.floating]) -> NDArray[np.floating]:
+    """Components (u_t, u_theta, u_rho) of Cartesian vectors in the local VCS frame.
+
+    Parameters
+    ----------
+    vectors : (n_tau, n_theta, 3) or (n_tau, n_theta, n_rho, 3) float
+        Cartesian vectors (any unit, e.g. m/s or Pa).
+    frame : (n_tau, n_theta, 3, 3) float
+        From :func:`local_frame`.
+
+    Returns
+    -------
+    float array of the shape of ``vectors``
+        Components along e_t, e_theta, e_rho, in the unit of ``vectors``.
+    """
     if vectors.ndim == 4:
         return np.einsum("ijab,ijkb->ijka", frame, vectors)
     return np.einsum("ijab,ijb->ija", frame, vectors)
 
 
-def from_vcs_components(components: np.ndarray, frame: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`to_vcs_components`."""
+def from_vcs_components(components: NDArray[np.floating], frame: NDArray[np.floating]) -> NDArray[np.floating]:
+    """Cartesian vectors from their local VCS components (inverse of :func:`to_vcs_components`).
+
+    Parameters
+    ----------
+    components : (n_tau, n_theta, 3) or (n_tau, n_theta, n_rho, 3) float
+        Components along e_t, e_theta, e_rho (any unit).
+    frame : (n_tau, n_theta, 3, 3) float
+        From :func:`local_frame`.
+
+    Returns
+    -------
+    float array of the shape of ``components``
+        Cartesian vectors, in the unit of ``components``.
+    """
     if components.ndim == 4:
         return np.einsum("ijab,ijka->ijkb", frame, components)
     return np.einsum("ijab,ija->ijb", frame, components)
 
 
-def grid_to_vtk(points: np.ndarray, point_arrays: dict | None = None, *, close_theta: bool = True):
+def grid_to_vtk(points: NDArray[np.floating], point_arrays: dict[str, NDArray[np.floating]] | None = None, *,
+                close_theta: bool = True) -> pv.UnstructuredGrid | pv.PolyData:
     """A (n_tau, n_theta, n_rho) or (n_tau, n_theta) grid as a pyvista UnstructuredGrid/PolyData.
 
     With ``close_theta`` the theta = 0 layer is repeated at 2 pi so the surface has no seam.
     Arrays have the grid's leading shape (plus a trailing 3 for vectors).
+
+    Parameters
+    ----------
+    points : (n_tau, n_theta, n_rho, 3) or (n_tau, n_theta, 3) float
+        Grid points (any length unit; written as given).
+    point_arrays : dict of str -> float array, optional
+        Point data, each of shape (n_tau, n_theta[, n_rho]) or with a trailing component axis.
+    close_theta : bool
+        Repeat the theta = 0 layer at theta = 2 pi.
+
+    Returns
+    -------
+    pyvista.UnstructuredGrid or pyvista.PolyData
+        Hexahedra for a volume grid, the quad surface for a (n_tau, n_theta) grid.
     """
     import pyvista as pv
 
@@ -125,14 +218,14 @@ class MeasurementGrid:
         VCS coordinates of every point (theta in rad).
     """
 
-    points: np.ndarray
-    cells: np.ndarray
-    tau: np.ndarray
-    theta: np.ndarray
-    rho_n: np.ndarray
+    points: NDArray[np.floating]
+    cells: NDArray[np.integer]
+    tau: NDArray[np.floating]
+    theta: NDArray[np.floating]
+    rho_n: NDArray[np.floating]
 
 
-def _ogrid_pattern(n_theta: int, n_rho: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _ogrid_pattern(n_theta: int, n_rho: int) -> tuple[NDArray[np.floating], NDArray[np.integer], NDArray[np.floating]]:
     """O-grid cross-section: (P, 2) points in the unit disk, (Q, 4) quads (counter-clockwise about
     t) and (P,) theta. A Cartesian core square (half-width 0.5 / sqrt 2, n_theta / 4 cells a side)
     is blended ring by ring into the circle rho_n = 1 (n_rho // 2 rings): no degenerate cell."""
@@ -166,7 +259,7 @@ def _ogrid_pattern(n_theta: int, n_rho: int) -> tuple[np.ndarray, np.ndarray, np
     return P_all, Q_all, np.mod(np.arctan2(P_all[:, 1], P_all[:, 0]), TWO_PI)
 
 
-def _cylindrical_cells(n_tau: int, n_theta: int, n_rho: int) -> np.ndarray:
+def _cylindrical_cells(n_tau: int, n_theta: int, n_rho: int) -> NDArray[np.integer]:
     """Hexahedra between the nodes (i, j, k) of a (n_tau, n_theta, n_rho) C-ordered node array,
     periodic in theta; cells touching the axis (k = 0) are degenerate, as in the paper's grid."""
     idx = np.arange(n_tau * n_theta * n_rho).reshape(n_tau, n_theta, n_rho)
@@ -177,16 +270,18 @@ def _cylindrical_cells(n_tau: int, n_theta: int, n_rho: int) -> np.ndarray:
     return np.concatenate([quad[:-1], quad[1:]], axis=-1).reshape(-1, 8)
 
 
-def measurement_grid(model, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
-                     n_rho: int = GRID_DEFAULTS["n_rho"], scheme: str = "cylindrical") -> MeasurementGrid:
+def measurement_grid(model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
+                     n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"],
+                     scheme: str = "cylindrical") -> MeasurementGrid:
     """The measurement grid of a vessel model with hexahedral cells (paper Section 2.4.2).
 
     Parameters
     ----------
-    model : VesselModel (mm) with a wall model
+    model : VesselModel
+        With a wall model; lengths in mm.
     n_tau, n_theta, n_rho : int
         Node counts, as for :func:`grid_axes`.
-    scheme : ``"cylindrical"`` or ``"ogrid"``
+    scheme : {"cylindrical", "ogrid"}
         ``cylindrical`` (the paper's): exactly the nodes of :func:`grid_points` in its C order
         (tau, theta, rho_n), i.e. the nodes ``fields.npz`` holds for the same counts.
         ``ogrid``: a visual alternative with a Cartesian core (no degenerate cell at the axis):
@@ -195,6 +290,13 @@ def measurement_grid(model, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int
     Returns
     -------
     MeasurementGrid
+        Points in mm.
+
+    Raises
+    ------
+    VCSInputError
+        For an unknown scheme, counts below 2, n_theta not a multiple of 4 (``ogrid``), or a
+        model without a wall model.
     """
     if scheme not in ("cylindrical", "ogrid"):
         raise VCSInputError(f"unknown grid scheme '{scheme}'; use cylindrical or ogrid")

@@ -8,11 +8,16 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
 from vcs.mesh import consistent_winding, triangle_cross
+
+if TYPE_CHECKING:
+    import pyvista as pv
 
 log = logging.getLogger(__name__)
 
@@ -38,18 +43,21 @@ class Surface:
         ``"given"`` or a sentence explaining how ``auto`` decided.
     path : str
         The file that was read.
+    warnings : tuple of str
+        Repairs made while reading (degenerate triangles removed, winding fixed, ...).
     """
 
-    vertices: np.ndarray
-    faces: np.ndarray
-    cell_data: dict = field(default_factory=dict)
+    vertices: NDArray[np.floating]
+    faces: NDArray[np.integer]
+    cell_data: dict[str, NDArray[Any]] = field(default_factory=dict)
     units: str = "mm"
     units_source: str = "given"
     path: str = ""
-    warnings: tuple = ()
+    warnings: tuple[str, ...] = ()
 
     @property
     def scale_to_mm(self) -> float:
+        """Millimetres per unit of the input file (1, 10 or 1000)."""
         return UNIT_TO_MM[self.units]
 
 
@@ -59,6 +67,18 @@ def guess_units(extent: float) -> tuple[str, str]:
     Human vessel sections span a few centimetres to ~40 cm. A largest extent below 1.0 is read as
     metres, from 1.0 to below 25 as centimetres, otherwise millimetres. The decision and the
     reason are reported; give ``--units`` explicitly when in doubt.
+
+    Parameters
+    ----------
+    extent : float
+        Largest bounding-box extent of the surface, in the (unknown) units of the file.
+
+    Returns
+    -------
+    unit : str
+        ``"m"``, ``"cm"`` or ``"mm"``.
+    reason : str
+        One sentence for the report.
     """
     if extent < 1.0:
         unit = "m"
@@ -69,7 +89,8 @@ def guess_units(extent: float) -> tuple[str, str]:
     return unit, f"auto: largest bounding-box extent {extent:.4g} read as {unit}"
 
 
-def _read_polydata(path: Path):
+def _read_polydata(path: Path) -> pv.PolyData:
+    """Read any pyvista-readable surface file as PolyData (VTK reader errors -> VCSInputError)."""
     import pyvista as pv
     import vtk
 
@@ -89,18 +110,32 @@ def _read_polydata(path: Path):
     return mesh
 
 
-def read_surface(path, units: str = "auto", *, check_extent: bool = True) -> Surface:
+def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = True) -> Surface:
     """Read a triangulated vessel wall (STL, VTP, VTK, PLY, OBJ) and convert it to mm.
+
+    Degenerate triangles are removed and the winding made consistent (both reported in
+    ``Surface.warnings``); scalar cell arrays are kept.
 
     Parameters
     ----------
-    path : str or Path
+    path : Path or str
         Surface file.
     units : {"auto", "mm", "cm", "m"}
         Units of the file; ``auto`` uses :func:`guess_units`.
     check_extent : bool
         Refuse explicit units that make the surface smaller than 5 mm or larger than 3 m (a whole
         vessel); off for cap surfaces.
+
+    Returns
+    -------
+    Surface
+        Vertices in mm.
+
+    Raises
+    ------
+    VCSInputError
+        For an unsupported, missing, empty or unreadable file, non-triangle or non-finite
+        geometry, unknown units, or an implausible size with explicit units.
     """
     path = Path(path)
     if path.suffix.lower() not in SURFACE_EXTENSIONS:
@@ -133,7 +168,7 @@ def read_surface(path, units: str = "auto", *, check_extent: bool = True) -> Sur
         for name in mesh.cell_data.keys()
         if np.asarray(mesh.cell_data[name]).ndim == 1
     }
-    warnings = []
+    warnings: list[str] = []
     tri = vertices[faces]
     area2 = np.linalg.norm(triangle_cross(tri), axis=1)
     degenerate = (area2 <= 1e-12 * max(float(np.ptp(vertices)), 1e-300) ** 2) | (faces[:, 0] == faces[:, 1]) \
@@ -163,20 +198,57 @@ def read_surface(path, units: str = "auto", *, check_extent: bool = True) -> Sur
     return Surface(vertices, faces, cell_data, units, source, str(path), tuple(warnings))
 
 
-def read_points_table(path) -> np.ndarray:
-    """Read (N, 3) points from ``.npy`` or ``.csv`` (header optional, columns x,y,z)."""
+def read_points_table(path: Path | str) -> NDArray[np.floating]:
+    """Read (N, 3) points from ``.npy`` or ``.csv`` (header optional, columns x,y,z).
+
+    Parameters
+    ----------
+    path : Path or str
+        A ``.csv`` with columns x,y,z (header optional) or a ``.npy`` array of shape (N, 3).
+
+    Returns
+    -------
+    (N, 3) float
+        The points, in the units of the file (not converted).
+
+    Raises
+    ------
+    VCSInputError
+        For another extension, a missing file, or non-numeric or wrongly shaped data.
+    """
     path = Path(path)
     if path.is_file() and path.suffix.lower() not in (".npy", ".csv"):
         raise VCSInputError(f"unsupported points file '{path}'; give a .csv (x,y,z) or .npy (N, 3)")
     return read_table_columns(path, ("x", "y", "z"), header_required=False, what="points file")
 
 
-def read_table_columns(path, names: tuple[str, ...], *, header_required: bool = True,
-                       what: str = "file") -> np.ndarray:
+def read_table_columns(path: Path | str, names: tuple[str, ...], *, header_required: bool = True,
+                       what: str = "file") -> NDArray[np.floating]:
     """Read named columns of a CSV (or an (N, len(names)) ``.npy``) as an (N, len(names)) array.
 
     Without ``header_required``, a CSV whose first line does not name the columns is read as
     headerless, its first ``len(names)`` columns in order.
+
+    Parameters
+    ----------
+    path : Path or str
+        A ``.csv`` (comma-separated, header names case-insensitive) or a ``.npy`` file.
+    names : tuple of str
+        Column names wanted, in the order of the result (e.g. ``("tau", "theta", "rho")``).
+    header_required : bool
+        Refuse a CSV whose header lacks one of ``names``.
+    what : str
+        What the file is, for the error messages.
+
+    Returns
+    -------
+    (N, len(names)) float
+        The columns, in the units of the file.
+
+    Raises
+    ------
+    VCSInputError
+        For a missing file, missing columns, no data rows, or non-numeric or wrongly shaped data.
     """
     path = Path(path)
     if not path.is_file():
@@ -205,8 +277,16 @@ def read_table_columns(path, names: tuple[str, ...], *, header_required: bool = 
     return arr
 
 
-def write_csv(path, columns: dict[str, np.ndarray]) -> None:
-    """Write equal-length columns as a CSV with a header (full float precision)."""
+def write_csv(path: Path | str, columns: dict[str, ArrayLike]) -> None:
+    """Write equal-length columns as a CSV with a header (full float precision).
+
+    Parameters
+    ----------
+    path : Path or str
+        Output file.
+    columns : dict of str -> (N,) array-like of float
+        Header name -> values, in column order; written as ``%.17g`` (round-trips float64).
+    """
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")

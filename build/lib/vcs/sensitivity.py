@@ -3,6 +3,9 @@ from __future__ import annotations
 
 import itertools
 import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +19,25 @@ log = logging.getLogger(__name__)
 
 
 def parse_range(text: str, name: str) -> list[int]:
-    """'a:b:s' (inclusive) or 'a' -> list of ints."""
+    """Parse a knot-number range ``'a:b:s'`` (b inclusive) or a single ``'a'`` into a list of ints.
+
+    Parameters
+    ----------
+    text : str
+        ``a:b:s`` with 1 <= a <= b and s >= 1, or ``a`` (>= 1).
+    name : str
+        Option name for the error message (``K`` -> ``--K``).
+
+    Returns
+    -------
+    list of int
+        a, a + s, ... up to b.
+
+    Raises
+    ------
+    VCSInputError
+        When ``text`` is not such a range.
+    """
     try:
         parts = [int(p) for p in str(text).split(":")]
     except ValueError:
@@ -28,12 +49,27 @@ def parse_range(text: str, name: str) -> list[int]:
     return list(range(parts[0], parts[1] + 1, parts[2]))
 
 
-def residual_sweep(surfaces: list[Surface], Ls, Ks, Rs) -> list[dict]:
-    """Cohort-averaged mean and 75th-percentile residuals (Eq. 11) for every (L, K, R).
+def residual_sweep(surfaces: list[Surface], Ls: Sequence[int], Ks: Sequence[int],
+                   Rs: Sequence[int]) -> list[dict[str, Any]]:
+    """Cohort-averaged mean and 75th-percentile residuals (Eq. 11) for every (L, K, R) (Section 3.1).
 
     The centerline is fitted once per (mesh, L); the wall model once per (mesh, L, K, R).
+
+    Parameters
+    ----------
+    surfaces : list of Surface
+        The cohort (mm); each must have its ends decidable without points (open loops or labelled
+        caps).
+    Ls, Ks, Rs : sequences of int
+        Interior knots of the centerline, and of the wall model in tau and theta.
+
+    Returns
+    -------
+    list of dict
+        One row per (L, K, R), sorted: ``L``, ``K``, ``R``, ``residual_mean_mm`` and
+        ``residual_p75_mm`` (cohort means, mm), ``n_meshes``.
     """
-    rows = {}
+    rows: dict[tuple[int, int, int], list[tuple[float, float]]] = {}
     for surf in surfaces:
         ends = find_ends(surf.vertices, surf.faces, surf.cell_data)
         wall_faces = surf.faces[ends.wall_mask]
@@ -50,8 +86,16 @@ def residual_sweep(surfaces: list[Surface], Ls, Ks, Rs) -> list[dict]:
     return out
 
 
-def plot_sweep(rows: list[dict], path) -> None:
-    """One panel per L: mean residual over the (K, R) grid (paper Fig. 5 style)."""
+def plot_sweep(rows: list[dict[str, Any]], path: Path | str) -> None:
+    """Plot the mean residual over the (K, R) grid, one panel per L (paper Fig. 5 style).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Output of :func:`residual_sweep`.
+    path : Path or str
+        Image file (format from the extension, e.g. ``.png``).
+    """
     import matplotlib
 
     matplotlib.use("Agg")

@@ -6,26 +6,40 @@ tau-theta grid, optional straight flow extensions, flat caps; multi-solid STL fo
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial import Delaunay
 
 from vcs.errors import VCSInputError
 from vcs.mesh import orient_outward, write_stl_ascii
+
+if TYPE_CHECKING:
+    from vcs.vessel import VesselModel
 
 TWO_PI = 2.0 * np.pi
 
 
 @dataclass(frozen=True)
 class WallMesh:
-    """Closed, outward-oriented triangle mesh: (N, 3) vertices (mm), (M, 3) faces and the solid
-    (0 wall, 1 inlet, 2 outlet) of each face."""
+    """Closed, outward-oriented triangle mesh of a model's wall (Eq. 8) with its two flat caps.
 
-    vertices: np.ndarray
-    faces: np.ndarray
-    solid: np.ndarray
+    Attributes
+    ----------
+    vertices : (N, 3) float, mm
+    faces : (M, 3) int
+        Triangles wound outward.
+    solid : (M,) int8
+        Solid of each face: index into :attr:`SOLIDS` (0 wall, 1 inlet, 2 outlet).
+    """
 
-    SOLIDS = ("wall", "inlet", "outlet")
+    vertices: NDArray[np.floating]
+    faces: NDArray[np.integer]
+    solid: NDArray[np.int8]
+
+    SOLIDS: ClassVar[tuple[str, ...]] = ("wall", "inlet", "outlet")
 
 
 def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
@@ -38,9 +52,14 @@ def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
     return np.concatenate([t1, t2])
 
 
-def _cap(ring: np.ndarray, center: np.ndarray, normal: np.ndarray, offset: int):
+def _cap(ring: NDArray[np.floating], center: NDArray[np.floating], normal: NDArray[np.floating],
+         offset: tuple[int, int]) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
     """Triangulate a flat, star-shaped cap bounded by ``ring`` (n, 3) with near-equilateral
-    triangles: interior points on a hexagonal lattice + Delaunay, boundary edges kept as given."""
+    triangles: interior points on a hexagonal lattice + Delaunay, boundary edges kept as given.
+
+    ``offset`` = (index of ring[0] in the mesh, index of the first new interior vertex); returns
+    the new interior vertices and the cap faces in mesh indices.
+    """
     n = len(ring)
     e1 = ring[0] - center
     e1 -= (e1 @ normal) * normal
@@ -78,17 +97,33 @@ def _cap(ring: np.ndarray, center: np.ndarray, normal: np.ndarray, offset: int):
     return verts3, idx
 
 
-def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
+def wall_mesh(model: VesselModel, *, n_tau: int | None = None, n_theta: int = 64,
               extend_inlet: float = 0.0, extend_outlet: float = 0.0) -> WallMesh:
-    """Eq. 8 wall on a regular tau-theta grid, closed by flat caps, outward-oriented.
+    """The model's wall (Eq. 8) on a regular tau-theta grid, closed by flat caps, outward-oriented.
 
     Parameters
     ----------
-    model : VesselModel (with a wall model)
-    n_tau : number of tau intervals; default gives square quads (axial step = mean arc step).
-    n_theta : vertices around the circumference.
-    extend_inlet, extend_outlet : straight flow extensions, in diameters of the end section,
-        along -t(0) and +t(1), keeping the end cross-section shape.
+    model : VesselModel
+        With a wall model; lengths in mm.
+    n_tau : int or None
+        Number of tau intervals; None gives square quads (axial step = mean arc step
+        2 pi mean(rho_w) / n_theta).
+    n_theta : int
+        Vertices around the circumference (>= 8).
+    extend_inlet, extend_outlet : float
+        Straight flow extensions, in diameters of the end section (dimensionless), along -t(0)
+        and +t(1), keeping the end cross-section shape.
+
+    Returns
+    -------
+    WallMesh
+        Vertices in mm.
+
+    Raises
+    ------
+    VCSInputError
+        When the model has no wall model, for n_theta < 8 or n_tau < 1, or a cap that cannot
+        be triangulated.
     """
     if model.wall is None:
         raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
@@ -141,8 +176,17 @@ def wall_mesh(model, *, n_tau: int | None = None, n_theta: int = 64,
     return WallMesh(V, F, S)
 
 
-def write_multisolid_stl(mesh: WallMesh, path, scale: float = 1.0) -> None:
-    """ASCII STL with one solid per patch name (what snappyHexMesh needs for patch names);
-    coordinates multiplied by ``scale`` (e.g. 1e-3: mm -> m)."""
+def write_multisolid_stl(mesh: WallMesh, path: Path | str, scale: float = 1.0) -> None:
+    """Write a wall mesh as ASCII STL with one solid per patch name (snappyHexMesh's patch names).
+
+    Parameters
+    ----------
+    mesh : WallMesh
+        Vertices in mm.
+    path : Path or str
+        Output file.
+    scale : float
+        Factor applied to the coordinates, output units per mm (e.g. 1e-3: mm -> m).
+    """
     V = mesh.vertices * scale
     write_stl_ascii(path, {name: V[mesh.faces[mesh.solid == k]] for k, name in enumerate(WallMesh.SOLIDS)})

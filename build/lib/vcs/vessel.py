@@ -6,8 +6,10 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from vcs.ends import find_ends
 from vcs.errors import VCSInputError
@@ -25,32 +27,66 @@ FORMAT_VERSION = 1
 class VesselModel:
     """VCS + wall model rho_w of one vessel section, all lengths in mm.
 
-    ``units`` is the unit of the input mesh (outputs of the CLI are given back in it).
+    Attributes
+    ----------
+    vcs : VesselCoordinateSystem
+        Centerline c(tau), frame and coordinates (paper Section 2.2).
+    wall : WallModel or None
+        rho_w(tau, theta) (Eq. 5); None when fitted without K and R.
+    units : str
+        Unit of the input mesh (``mm``, ``cm`` or ``m``); outputs of the CLI are given back in it.
+    meta : dict
+        Provenance (source mesh, how the ends were found, end centres in mm, L).
     """
 
     vcs: VesselCoordinateSystem
     wall: WallModel | None
     units: str = "mm"
-    meta: dict = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
 
     @property
     def scale_to_mm(self) -> float:
+        """Millimetres per unit of the input mesh (1, 10 or 1000)."""
         return UNIT_TO_MM[self.units]
 
     # -- feature vector (paper Section 2.3.1) -------------------------------------------------
-    def feature_vector(self) -> np.ndarray:
-        """a = (c_0..c_n, b_00..b_n1n2): centerline control points then wall coefficients (mm)."""
+    def feature_vector(self) -> NDArray[np.floating]:
+        """Feature vector a = (c_0..c_n, b_00..b_n1n2) of the model (paper Section 2.3.1).
+
+        Returns
+        -------
+        (3 (L + 4) [+ (K + 4) (R + 1)],) float, mm
+            The centerline control points (row-major, (L + 4, 3)), then the wall coefficients
+            (row-major, (K + 4, R + 1)) when there is a wall model.
+        """
         parts = [self.vcs.control_points.ravel()]
         if self.wall is not None:
             parts.append(self.wall.coefficients.ravel())
         return np.concatenate(parts)
 
     @classmethod
-    def from_feature_vector(cls, a: np.ndarray, template: "VesselModel") -> "VesselModel":
-        """Rebuild a model with the knots, frame rule and metadata of ``template`` from vector ``a``.
+    def from_feature_vector(cls, a: ArrayLike, template: VesselModel) -> VesselModel:
+        """Rebuild a model from a feature vector with the knots, frame rule and metadata of ``template``.
 
         The frame's v1(0) is recomputed by transporting the template's choice onto the new
-        tangent (it is not part of the vector); every other number comes from ``a``.
+        tangent (it is not part of the vector); every other number comes from ``a``
+        (paper Section 2.3.1).
+
+        Parameters
+        ----------
+        a : (n,) float, mm
+            Feature vector laid out as :meth:`feature_vector` of ``template``.
+        template : VesselModel
+            Supplies the knots, degree, v1(0) rule, units and metadata.
+
+        Returns
+        -------
+        VesselModel
+
+        Raises
+        ------
+        VCSInputError
+            When ``a`` does not have the template's length.
         """
         from scipy.interpolate import BSpline
 
@@ -71,15 +107,42 @@ class VesselModel:
         return cls(vcs, wall, template.units, dict(template.meta))
 
     # -- geometry -----------------------------------------------------------------------------
-    def surface_points(self, tau, theta) -> np.ndarray:
-        """Wall points x(tau, theta) = c(tau) + rho_w(tau, theta) (v1 cos theta + v2 sin theta) (Eq. 8)."""
+    def surface_points(self, tau: ArrayLike, theta: ArrayLike) -> NDArray[np.floating]:
+        """Wall points x(tau, theta) = c(tau) + rho_w(tau, theta) (v1 cos theta + v2 sin theta) (Eq. 8).
+
+        Parameters
+        ----------
+        tau : float or array of float
+            Normalised arc length in [0, 1].
+        theta : float or array of float, rad
+            Angle about the centerline; broadcast against ``tau``.
+
+        Returns
+        -------
+        (..., 3) float, mm
+            Wall points, leading shape the broadcast shape of ``tau`` and ``theta``.
+
+        Raises
+        ------
+        VCSInputError
+            When the model has no wall model.
+        """
         if self.wall is None:
             raise VCSInputError("this model has no wall model; refit it with `vcs fit` (K, R)")
         tau, theta = np.broadcast_arrays(np.asarray(tau, float), np.asarray(theta, float))
         return self.vcs.to_cartesian(tau, theta, self.wall(tau, theta))
 
     # -- I/O ----------------------------------------------------------------------------------
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
+        """The model as plain JSON values (the content of model.json).
+
+        Returns
+        -------
+        dict
+            ``format_version``, ``units``, ``centerline`` (see
+            :meth:`VesselCoordinateSystem.to_dict`), ``wall`` (:meth:`WallModel.to_dict` or None),
+            ``meta``.
+        """
         return {
             "format_version": FORMAT_VERSION,
             "units": {"internal": "mm", "input": self.units, "scale_to_mm": self.scale_to_mm},
@@ -89,17 +152,36 @@ class VesselModel:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "VesselModel":
-        version = d.get("format_version")
-        if version != FORMAT_VERSION:
-            raise VCSInputError(
-                f"model format_version {version!r} is not supported (this vcs reads {FORMAT_VERSION}); refit with `vcs fit`"
-            )
+    def from_dict(cls, d: dict[str, Any]) -> VesselModel:
+        """Rebuild a model from :meth:`to_dict` output (a parsed model.json).
+
+        Parameters
+        ----------
+        d : dict
+            As written by :meth:`to_dict`.
+
+        Returns
+        -------
+        VesselModel
+
+        Raises
+        ------
+        VCSInputError
+            When ``format_version`` is not the one this code writes, or the wall model's sizes do
+            not match.
+        """
+        _check_format_version(d)
         wall = None if d.get("wall") is None else WallModel.from_dict(d["wall"])
         return cls(VesselCoordinateSystem.from_dict(d["centerline"]), wall, d["units"]["input"], d.get("meta", {}))
 
-    def save(self, path) -> None:
-        """Write model.json (deterministic: same model, same bytes)."""
+    def save(self, path: Path | str) -> None:
+        """Write the model as JSON (deterministic: same model, same bytes), atomically.
+
+        Parameters
+        ----------
+        path : Path or str
+            Output file (model.json); written via a ``.tmp`` file then renamed.
+        """
         text = json.dumps(self.to_dict(), indent=1, sort_keys=True)
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp")
@@ -107,7 +189,24 @@ class VesselModel:
         tmp.replace(path)  # atomic: never a half-written model.json
 
     @classmethod
-    def load(cls, path) -> "VesselModel":
+    def load(cls, path: Path | str) -> VesselModel:
+        """Read a model.json written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : Path or str
+            The model file.
+
+        Returns
+        -------
+        VesselModel
+
+        Raises
+        ------
+        VCSInputError
+            One line naming the file and what is wrong, when it is missing, not JSON, of another
+            format version or inconsistent.
+        """
         path = Path(path)
         if not path.is_file():
             raise VCSInputError(f"model file '{path}' does not exist; create it with `vcs fit`")
@@ -120,16 +219,44 @@ class VesselModel:
         try:
             if d.get("units", {}).get("input") not in UNIT_TO_MM:
                 raise ValueError("unknown input units")
-            return cls.from_dict(d)
+            _check_format_version(d)
         except VCSInputError:
-            raise
-        except (KeyError, ValueError, TypeError, IndexError, AssertionError) as exc:
+            raise  # its own message: which format version, refit
+        except (KeyError, ValueError, TypeError, IndexError) as exc:
+            raise VCSInputError(f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); "
+                                "refit it with `vcs fit`") from None
+        try:
+            return cls.from_dict(d)
+        except VCSInputError as exc:  # e.g. wall coefficients of the wrong shape: name the file
+            raise VCSInputError(f"'{path}' is not a valid model.json ({exc}); refit it with `vcs fit`") from None
+        except (KeyError, ValueError, TypeError, IndexError) as exc:
             raise VCSInputError(f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); "
                                 "refit it with `vcs fit`") from None
 
 
+def _check_format_version(d: dict[str, Any]) -> None:
+    """Raise VCSInputError unless a model dict has this code's ``format_version``."""
+    version = d.get("format_version")
+    if version != FORMAT_VERSION:
+        raise VCSInputError(
+            f"model format_version {version!r} is not supported (this vcs reads {FORMAT_VERSION}); refit with `vcs fit`"
+        )
+
+
 def largest_component(surf: Surface) -> Surface:
-    """Keep the connected component of largest area; the others are reported in ``warnings``."""
+    """Keep the connected component of largest area; the others are reported in ``warnings``.
+
+    Parameters
+    ----------
+    surf : Surface
+        Triangulated surface (mm).
+
+    Returns
+    -------
+    Surface
+        ``surf`` itself when it is connected; otherwise the largest-area component, its unused
+        vertices dropped and faces renumbered, cell arrays kept per face, one warning added.
+    """
     f = surf.faces
     n = len(surf.vertices)
     face_lab = connected_faces(f, n)
@@ -150,8 +277,26 @@ def largest_component(surf: Surface) -> Surface:
                    surf.units, surf.units_source, surf.path, (*surf.warnings, msg))
 
 
-def parse_point(text: str | None, name: str) -> np.ndarray | None:
-    """'x,y,z' -> (3,) array (None passes through)."""
+def parse_point(text: str | ArrayLike | None, name: str) -> NDArray[np.floating] | None:
+    """Parse a point given as ``'x,y,z'`` (or already as 3 numbers) into a (3,) array.
+
+    Parameters
+    ----------
+    text : str, array-like of 3 floats, or None
+        The point, in mesh units; None passes through.
+    name : str
+        Option name for the error message (``inlet`` -> ``--inlet``).
+
+    Returns
+    -------
+    (3,) float or None
+        In the units of ``text`` (mesh units; not converted).
+
+    Raises
+    ------
+    VCSInputError
+        When a string is not three finite comma-separated numbers.
+    """
     if text is None:
         return None
     if not isinstance(text, str):
@@ -166,24 +311,52 @@ def parse_point(text: str | None, name: str) -> np.ndarray | None:
 
 
 def fit_vessel(
-    mesh,
+    mesh: Surface | Path | str,
     *,
     units: str = "auto",
-    inlet=None,
-    outlet=None,
-    inlet_cap=None,
-    outlet_cap=None,
+    inlet: str | ArrayLike | None = None,
+    outlet: str | ArrayLike | None = None,
+    inlet_cap: Path | str | None = None,
+    outlet_cap: Path | str | None = None,
     cap_array: str | None = "auto",
     L: int = 9,
     K: int | None = 19,
     R: int | None = 15,
     recentre_iterations: int = 3,
-) -> tuple[VesselModel, dict, WallFit | None]:
+) -> tuple[VesselModel, dict[str, Any], WallFit | None]:
     """Fit the VCS (and the wall model when K and R are given) to a surface file or :class:`Surface`.
 
-    ``inlet``/``outlet`` are points in the mesh's units (``'x,y,z'`` strings or arrays);
-    ``inlet_cap``/``outlet_cap`` paths of cap surfaces in the same units.
-    Returns (model, report, wall_fit).
+    Reads and cleans the mesh (largest component), finds the two ends (Section 2.2.1), builds the
+    centerline and frame (Sections 2.2.1-2.2.2) and fits rho_w (Section 2.3.1, Eqs. 5-7).
+
+    Parameters
+    ----------
+    mesh : Surface, Path or str
+        A surface file (see :func:`vcs.io.read_surface`) or an already read :class:`Surface`.
+    units : {"auto", "mm", "cm", "m"}
+        Units of the file (ignored for a :class:`Surface`).
+    inlet, outlet : str, array-like of 3 floats, or None
+        End points in the mesh's units (``'x,y,z'`` strings or arrays), see
+        :func:`vcs.ends.find_ends`.
+    inlet_cap, outlet_cap : Path, str or None
+        Cap surface files, in the mesh's units; give both or neither.
+    cap_array : str or None
+        Cell array labelling the caps; ``"auto"`` tries the usual names, None disables.
+    L : int
+        Interior knots of the centerline c(tau).
+    K, R : int or None
+        Interior knots of the wall model in tau and theta; None for no wall model.
+    recentre_iterations : int
+        Re-centring steps of the centerline.
+
+    Returns
+    -------
+    model : VesselModel
+        All lengths in mm; ``units`` is the mesh's.
+    report : dict
+        JSON-ready fit report (warnings, counts, end planes, wall residuals in mm, timings in s).
+    wall_fit : WallFit or None
+        Per-vertex wall-fit arrays; None without a wall model.
     """
     t0 = time.perf_counter()
     surf = mesh if isinstance(mesh, Surface) else read_surface(mesh, units)
@@ -193,7 +366,7 @@ def fit_vessel(
     p_out = parse_point(outlet, "outlet")
     if p_in is not None and p_out is not None and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
-    caps = []
+    caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
     for cap in (inlet_cap, outlet_cap):
         if cap is None:
             caps.append(None)

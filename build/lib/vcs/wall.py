@@ -8,9 +8,11 @@ with a small second-difference penalty (instead of the paper's SLSQP on a penali
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 from scipy.sparse import linalg as sparse_linalg
 from scipy.interpolate import BSpline, NdBSpline
@@ -19,29 +21,84 @@ from vcs.centerline import uniform_knots
 from vcs.errors import VCSInputError
 from vcs.mesh import triangle_cross, vertex_adjacency, vertex_normals
 
+if TYPE_CHECKING:
+    from vcs.model import VesselCoordinateSystem
+
 log = logging.getLogger(__name__)
 
 TWO_PI = 2.0 * np.pi
 
 
-def periodic_knots(n_interior: int, k: int = 3) -> np.ndarray:
-    """Uniform knots of a periodic spline on [0, 2 pi) with R = n_interior interior knots,
-    extended by k on both sides: R + 1 distinct basis functions (index folded modulo R + 1)."""
+def periodic_knots(n_interior: int, k: int = 3) -> NDArray[np.floating]:
+    """Uniform knot vector of a periodic spline in theta on [0, 2 pi) (paper Section 2.3.1, Eq. 5).
+
+    With R = ``n_interior`` interior knots the period holds R + 1 equal spans; the vector is
+    extended by ``k`` spans on both sides, so there are R + 1 distinct basis functions (the
+    coefficient index is folded modulo R + 1).
+
+    Parameters
+    ----------
+    n_interior : int
+        R, the number of interior knots in [0, 2 pi) (R >= 0).
+    k : int
+        Spline degree (3: cubic).
+
+    Returns
+    -------
+    (R + 2 k + 2,) float, rad
+        Knots d * (-k, ..., R + 1 + k) with d = 2 pi / (R + 1).
+    """
     n = n_interior + 1
     d = TWO_PI / n
     return d * np.arange(-k, n + k + 1)
 
 
-def periodic_design_matrix(theta: np.ndarray, n_interior: int, k: int = 3) -> sparse.csr_matrix:
-    """(N, R + 1) periodic cubic B-spline basis at angles ``theta`` (any real; wrapped)."""
+def periodic_design_matrix(theta: ArrayLike, n_interior: int, k: int = 3) -> sparse.csr_matrix:
+    """Periodic B-spline basis B_j(theta) of the wall model at the given angles (Eq. 5, theta part).
+
+    Parameters
+    ----------
+    theta : (N,) float, rad
+        Angles, any real value (wrapped to [0, 2 pi)).
+    n_interior : int
+        R, the number of interior knots in theta.
+    k : int
+        Spline degree (3: cubic).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, (N, R + 1) float
+        Row i holds B_j(theta_i), j = 0..R (dimensionless, each row sums to 1).
+    """
     n = n_interior + 1
     th = np.mod(np.asarray(theta, float), TWO_PI)
     B = BSpline.design_matrix(th, periodic_knots(n_interior, k), k).tocoo()
     return sparse.csr_matrix((B.data, (B.row, B.col % n)), shape=(len(th), n))
 
 
-def tensor_design_matrix(tau, theta, K: int, R: int) -> sparse.csr_matrix:
-    """Row-wise Kronecker product of the tau and theta bases: (N, (K + 4) (R + 1)) (Eq. 5)."""
+def tensor_design_matrix(tau: ArrayLike, theta: ArrayLike, K: int, R: int) -> sparse.csr_matrix:
+    """Tensor-product basis B_i(tau) B_j(theta) of the wall model at samples (Eq. 5).
+
+    Row-wise Kronecker product of the clamped cubic basis in tau and the periodic cubic basis in
+    theta.
+
+    Parameters
+    ----------
+    tau : (N,) float
+        Normalised arc length in [0, 1] (clipped to it).
+    theta : (N,) float, rad
+        Angles, any real value (wrapped).
+    K : int
+        Interior knots in tau (K + 4 functions).
+    R : int
+        Interior knots in theta (R + 1 functions).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, (N, (K + 4) (R + 1)) float
+        Column i (R + 1) + j holds B_i(tau) B_j(theta), matching ``coefficients.ravel()`` of a
+        :class:`WallModel`.
+    """
     Bt = BSpline.design_matrix(np.clip(tau, 0, 1), uniform_knots(K), 3).tocsr()
     Bp = periodic_design_matrix(theta, R)
     nt, nth = Bt.shape[1], Bp.shape[1]
@@ -61,31 +118,89 @@ def tensor_design_matrix(tau, theta, K: int, R: int) -> sparse.csr_matrix:
 
 @dataclass(frozen=True)
 class WallModel:
-    """rho_w(tau, theta) with coefficients b (K + 4, R + 1) in mm."""
+    """Wall model rho_w(tau, theta): a bicubic B-spline, clamped in tau, periodic in theta (Eq. 5).
+
+    rho_w(tau, theta) = sum_ij b_ij B_i(tau) B_j(theta) (paper Section 2.3.1, Eqs. 5-7).
+
+    Attributes
+    ----------
+    K : int
+        Interior knots in tau (uniform, clamped: K + 4 basis functions), K >= 0.
+    R : int
+        Interior knots in theta (uniform, periodic on [0, 2 pi): R + 1 basis functions), R >= 0.
+    coefficients : (K + 4, R + 1) float, mm
+        The coefficients b_ij.
+
+    Raises
+    ------
+    VCSInputError
+        When K or R is negative or ``coefficients`` is not of shape (K + 4, R + 1).
+    """
 
     K: int
     R: int
-    coefficients: np.ndarray
+    coefficients: NDArray[np.floating]
+    # the evaluator, built in __post_init__ (not an argument, not compared, not shown)
+    _spline: NdBSpline = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
+        """Check the sizes and build the tensor-product spline evaluator."""
         k = self.K + 4
         n = self.R + 1
+        if self.K < 0 or self.R < 0:
+            raise VCSInputError(f"the wall model needs K >= 0 and R >= 0 interior knots, got K={self.K}, R={self.R}")
+        if np.shape(self.coefficients) != (k, n):
+            raise VCSInputError(
+                f"wall model coefficients have shape {np.shape(self.coefficients)}, "
+                f"but K={self.K}, R={self.R} need (K + 4, R + 1) = ({k}, {n})"
+            )
         ext = self.coefficients[:, np.arange(n + 3) % n]  # periodic extension for NdBSpline
         object.__setattr__(
             self, "_spline", NdBSpline((uniform_knots(self.K), periodic_knots(self.R)), ext, 3)
         )
-        assert self.coefficients.shape == (k, n)
 
-    def __call__(self, tau, theta) -> np.ndarray:
-        """rho_w at (tau, theta) (Eq. 5), vectorised, any shape; theta wrapped to [0, 2 pi)."""
+    def __call__(self, tau: ArrayLike, theta: ArrayLike) -> NDArray[np.floating]:
+        """Wall radius rho_w(tau, theta) (Eq. 5), vectorised over broadcastable inputs.
+
+        Parameters
+        ----------
+        tau : float or array of float
+            Normalised arc length; clipped to [0, 1].
+        theta : float or array of float, rad
+            Angle about the centerline; wrapped to [0, 2 pi).
+
+        Returns
+        -------
+        array of float, mm
+            rho_w, of the broadcast shape of ``tau`` and ``theta``.
+        """
         tau, theta = np.broadcast_arrays(np.asarray(tau, float), np.asarray(theta, float))
         xi = np.stack([np.clip(tau, 0, 1).ravel(), np.mod(theta, TWO_PI).ravel()], axis=-1)
         return self._spline(xi).reshape(tau.shape)
 
-    def with_coefficients(self, b: np.ndarray) -> "WallModel":
+    def with_coefficients(self, b: ArrayLike) -> WallModel:
+        """The same knots with other coefficients.
+
+        Parameters
+        ----------
+        b : (K + 4, R + 1) or ((K + 4) (R + 1),) float, mm
+            New coefficients b_ij (row-major when flat, as in the feature vector).
+
+        Returns
+        -------
+        WallModel
+        """
         return WallModel(self.K, self.R, np.asarray(b, float).reshape(self.coefficients.shape))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
+        """The model as plain JSON values (the ``wall`` block of model.json).
+
+        Returns
+        -------
+        dict
+            ``K``, ``R``, ``degree`` (3), descriptions of the knots and ``coefficients``
+            ((K + 4) lists of R + 1 floats, mm).
+        """
         return {
             "K": int(self.K),
             "R": int(self.R),
@@ -96,7 +211,18 @@ class WallModel:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "WallModel":
+    def from_dict(cls, d: dict[str, Any]) -> WallModel:
+        """Rebuild a model from :meth:`to_dict` output.
+
+        Parameters
+        ----------
+        d : dict
+            With keys ``K``, ``R`` and ``coefficients`` ((K + 4) x (R + 1) nested list, mm).
+
+        Returns
+        -------
+        WallModel
+        """
         return cls(int(d["K"]), int(d["R"]), np.array(d["coefficients"], float))
 
 
@@ -111,13 +237,35 @@ def _penalty(K: int, R: int) -> sparse.csr_matrix:
     return sparse.vstack([sparse.kron(Dt, sparse.eye(nth)), sparse.kron(sparse.eye(nt), Dp)]).tocsr()
 
 
-def lsq_wall(tau, theta, rho, weights, K: int, R: int, smoothing: float = 1e-5) -> WallModel:
-    """Least-squares fit of rho_w to (tau, theta, rho) samples (paper Eqs. 5-7).
+def lsq_wall(tau: ArrayLike, theta: ArrayLike, rho: ArrayLike, weights: ArrayLike, K: int, R: int,
+             smoothing: float = 1e-5) -> WallModel:
+    """Weighted least-squares fit of the wall model rho_w to (tau, theta, rho) samples (Eqs. 5-7).
 
     Minimises sum_i w_i (rho_w(tau_i, theta_i) - rho_i)^2 + lambda |D b|^2, with D the second
     differences of the coefficient grid and lambda = ``smoothing`` * mean diagonal of B^T W B
     (a tiny, documented penalty: knot spans without data get a smooth in-fill instead of an
     ill-posed solve). One sparse Cholesky-free solve of a (K+4)(R+1) system.
+
+    Parameters
+    ----------
+    tau : (N,) float
+        Normalised arc length of the samples, in [0, 1].
+    theta : (N,) float, rad
+        Angles of the samples.
+    rho : (N,) float, mm
+        Distances of the samples from the centerline.
+    weights : (N,) float
+        Sample weights w_i (e.g. vertex areas, mm^2; only their ratios matter).
+    K : int
+        Interior knots in tau.
+    R : int
+        Interior knots in theta.
+    smoothing : float
+        Relative penalty weight (dimensionless).
+
+    Returns
+    -------
+    WallModel
     """
     B = tensor_design_matrix(tau, theta, K, R)
     W = sparse.diags(np.asarray(weights, float))
@@ -131,26 +279,45 @@ def lsq_wall(tau, theta, rho, weights, K: int, R: int, smoothing: float = 1e-5) 
 
 @dataclass(frozen=True)
 class WallFit:
-    """Result of :func:`fit_wall`: the model, per-vertex arrays and the report."""
+    """Result of :func:`fit_wall`: the model, per-vertex arrays and the report.
+
+    The arrays hold the n wall vertices that were evaluated (those used by a wall face).
+
+    Attributes
+    ----------
+    model : WallModel
+    points : (n, 3) float, mm
+        Wall vertices.
+    tau, theta, rho : (n,) float
+        Their VCS coordinates (theta in rad, rho in mm).
+    residual : (n,) float, mm
+        |p - x(tau(p), theta(p))| = |rho - rho_w(tau, theta)| (Eq. 11).
+    used : (n,) bool
+        The vertex took part in the final fit.
+    reason : (n,) int
+        Why a vertex was (not) used, a key of :data:`REASONS`.
+    report : dict
+        JSON-ready summary: counts per reason, residual statistics (mm), K, R, smoothing.
+    """
 
     model: WallModel
-    points: np.ndarray  # (n, 3) wall vertices, mm
-    tau: np.ndarray
-    theta: np.ndarray
-    rho: np.ndarray
-    residual: np.ndarray  # |p - x(tau(p), theta(p))| (Eq. 11), mm; nan where not evaluated
-    used: np.ndarray  # bool
-    reason: np.ndarray  # int code, see REASONS
-    report: dict
+    points: NDArray[np.floating]  # (n, 3) wall vertices, mm
+    tau: NDArray[np.floating]
+    theta: NDArray[np.floating]
+    rho: NDArray[np.floating]
+    residual: NDArray[np.floating]  # |p - x(tau(p), theta(p))| (Eq. 11), mm; nan where not evaluated
+    used: NDArray[np.bool_]  # bool
+    reason: NDArray[np.integer]  # int code, see REASONS
+    report: dict[str, Any]
 
 
 REASONS = {0: "used", 1: "beyond_end_planes", 2: "outside_omega", 3: "not_first_crossing", 4: "branch"}
 
 
-def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: int = 15,
-             smoothing: float = 1e-5, branch_rel: float = 0.12, grow_rel: float = 0.3,
-             orientation: float | None = None) -> WallFit:
-    """Fit rho_w to the wall vertices of a section and compute residuals (Eqs. 5-7, 11).
+def fit_wall(vcs: VesselCoordinateSystem, vertices: NDArray[np.floating], faces: NDArray[np.integer], *,
+             K: int = 19, R: int = 15, smoothing: float = 1e-5, branch_rel: float = 0.12,
+             grow_rel: float = 0.3, orientation: float | None = None) -> WallFit:
+    """Fit the wall model rho_w to the wall vertices of a section and compute residuals (Eqs. 5-7, 11).
 
     Vertices are left out, and counted by reason, when they lie beyond an end plane, outside
     Omega, when the ray from c(tau) does not reach them first (their outward normal faces the
@@ -158,6 +325,37 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
     than ``branch_rel`` of the local radius, or above the median radius of their tau ring by more
     than 2.5 ``branch_rel``; such regions are grown by ``grow_rel`` times the median vessel radius,
     to take the flare of the ostium too).
+
+    Parameters
+    ----------
+    vcs : VesselCoordinateSystem
+        The section's coordinate system (mm).
+    vertices : (N, 3) float, mm
+        Mesh vertices.
+    faces : (M, 3) int
+        Wall triangles (caps left out); only their vertices are evaluated.
+    K : int
+        Interior knots in tau.
+    R : int
+        Interior knots in theta.
+    smoothing : float
+        Relative second-difference penalty, see :func:`lsq_wall`.
+    branch_rel : float
+        Side-branch threshold, as a fraction of the local radius (dimensionless).
+    grow_rel : float
+        Growth of the side-branch regions, in median vessel radii (dimensionless).
+    orientation : float or None
+        +1 when the faces are wound outward, -1 inward; None: decided from the area-weighted
+        majority of the vertex normals.
+
+    Returns
+    -------
+    WallFit
+
+    Raises
+    ------
+    VCSInputError
+        When fewer wall vertices are usable than there are coefficients, (K + 4) (R + 1).
     """
     used_v = np.unique(faces)
     tau = np.full(len(vertices), np.nan)
@@ -227,7 +425,7 @@ def fit_wall(vcs, vertices: np.ndarray, faces: np.ndarray, *, K: int = 19, R: in
         r_ = np.concatenate([rho[sel], ring_median()[b[fill]]])
         return lsq_wall(t_, a_, r_, np.concatenate([w[sel], w[fill]]), K, R, smoothing)
 
-    model = None
+    model: WallModel  # assigned by the first pass of the loop
     for _ in range(6):
         model = fit()
         cand = (reason == 0) | (reason == 4)

@@ -6,13 +6,18 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, deep_merge, detect_openfoam, template_dir
 from vcs.cfd.foamfiles import patch_geometry
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 from vcs.mesh import points_inside, read_stl_solids, triangle_cross
+
+if TYPE_CHECKING:
+    import jinja2
 
 STL_NAME = "vessel.stl"
 CASE_JSON = "vcsflow_case.json"
@@ -20,7 +25,8 @@ CASE_JSON = "vcsflow_case.json"
 # --------------------------------------------------------------------------- rendering
 
 
-def _jinja_env(flavour: str):
+def _jinja_env(flavour: str) -> jinja2.Environment:
+    """jinja2 environment of a flavour: its override templates first, then ``common/``."""
     import jinja2
     return jinja2.Environment(
         loader=jinja2.ChoiceLoader([
@@ -32,7 +38,18 @@ def _jinja_env(flavour: str):
 
 
 def patch_role(name: str) -> str:
-    """Role of an STL solid / patch from its name: inlet*, outlet*, wall* or other."""
+    """Role of an STL solid / patch from its name: inlet*, outlet*, wall* or other.
+
+    Parameters
+    ----------
+    name : str
+        Solid or patch name (case-insensitive prefix match).
+
+    Returns
+    -------
+    str
+        ``"inlet"``, ``"outlet"``, ``"wall"`` or ``"other"``.
+    """
     n = name.lower()
     if n.startswith("inlet"):
         return "inlet"
@@ -43,7 +60,12 @@ def patch_role(name: str) -> str:
     return "other"
 
 
-def _inside_point(solids: dict[str, np.ndarray], bmin: np.ndarray, h: float) -> list[float]:
+def _inside_point(solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floating], h: float) -> list[float]:
+    """A point inside the closed STL (for snappyHexMesh), off the background mesh's faces.
+
+    Tried in order: points on the inlet's normal at 4, 8, 16, 2, 32 cells from its centroid, then
+    the mean of all corners; each snapped to a fixed fraction inside its background cell.
+    """
     alltris = np.concatenate(list(solids.values()))
     inlets = [k for k in solids if patch_role(k) == "inlet"]
     seeds = []
@@ -64,7 +86,8 @@ def _inside_point(solids: dict[str, np.ndarray], bmin: np.ndarray, h: float) -> 
     raise VCSInputError("could not find a point inside the vessel surface; set mesh.inside_point")
 
 
-def _context(state: dict, **extra) -> dict:
+def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """Template variables of a case state; ``extra`` overrides them."""
     cfd = state["cfd"]
     ctx = {
         "flavour": state["flavour"], "flav": FLAVOURS[state["flavour"]],
@@ -81,9 +104,20 @@ def _context(state: dict, **extra) -> dict:
     return ctx
 
 
-def render_files(case_dir: Path, state: dict, files: list[str], **extra) -> None:
-    """Render the template ``files`` (case-relative paths) of the state's flavour into ``case_dir``;
-    ``extra`` overrides template variables (e.g. ``end_time`` of a stage)."""
+def render_files(case_dir: Path, state: dict[str, Any], files: list[str], **extra: Any) -> None:
+    """Render template files of the state's flavour into a case.
+
+    Parameters
+    ----------
+    case_dir : Path
+        The case folder.
+    state : dict
+        Case description from :func:`render_case`.
+    files : list of str
+        Case-relative paths (e.g. ``"system/controlDict"``), also the template names.
+    **extra
+        Overrides of template variables (e.g. ``end_time`` of a stage, ``inlet_values``).
+    """
     env = _jinja_env(state["flavour"])
     ctx = _context(state, **extra)
     for rel in files:
@@ -92,17 +126,46 @@ def render_files(case_dir: Path, state: dict, files: list[str], **extra) -> None
         out.write_text(env.get_template(rel).render(**ctx))
 
 
-def _flow_rate(inlet: dict) -> float:
+def _flow_rate(inlet: dict[str, Any]) -> float:
+    """Inlet flow rate Q in m^3/s: ``flow_rate`` if set, else velocity (m/s) x valve_area (m^2)."""
     if inlet.get("flow_rate"):
         return float(inlet["flow_rate"])
     return float(inlet["velocity"]) * float(inlet["valve_area"])
 
 
-def render_case(case_dir, stl_path, cfd: dict | None = None, *, flavour: str | None = None) -> dict:
-    """Write a complete OpenFOAM case for a multi-solid ASCII STL (metres; solids wall/inlet/outlet...).
+def render_case(case_dir: Path | str, stl_path: Path | str, cfd: dict[str, Any] | None = None, *,
+                flavour: str | None = None) -> dict[str, Any]:
+    """Write a complete OpenFOAM case for a multi-solid ASCII STL (paper Section 2.4.1).
 
     ``cfd`` is merged over ``DEFAULTS``. The flavour is ``flavour`` or ``cfd['flavour']`` or the
-    detected installation.  Returns the case description (also saved as ``vcsflow_case.json``)."""
+    detected installation (``"esi"`` when none is found).
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        Case folder (created).
+    stl_path : Path or str
+        Multi-solid ASCII STL in metres with one ``inlet*`` solid, at least one ``outlet*`` solid
+        and the ``wall*`` solid(s) (e.g. from :func:`vcs.surface.write_multisolid_stl`).
+    cfd : dict or None
+        CFD parameters merged over :data:`vcs.cfd.openfoam.DEFAULTS` (SI units: m, m/s, m^3/s,
+        m^2/s, kg/m^3).
+    flavour : str or None
+        ``"esi"`` or ``"org10"``; overrides ``cfd['flavour']``.
+
+    Returns
+    -------
+    dict
+        The case description (also saved as ``vcsflow_case.json``): flavour, merged ``cfd``,
+        background box ``bmin``/``bmax`` (m) and ``ncells``, ``inside_point`` (m), solids and
+        patches with their roles, ``flow_rate`` (m^3/s), ``stl_bounds`` (m), ``files``.
+
+    Raises
+    ------
+    VCSInputError
+        For an unknown flavour or inlet type, an STL without exactly one inlet or without an
+        outlet, or when no point inside the surface is found.
+    """
     case_dir = Path(case_dir)
     cfd = deep_merge(DEFAULTS, cfd)
     flavour = flavour or cfd.get("flavour") or detect_openfoam()[0] or "esi"
@@ -155,8 +218,33 @@ def render_case(case_dir, stl_path, cfd: dict | None = None, *, flavour: str | N
 # --------------------------------------------------------------------------- inlet profile
 
 
-def inlet_profile(case_dir: Path, state: dict) -> dict:
-    """Face-wise inlet velocities on the meshed inlet patch, scaled so sum(U.Sf) = -Q exactly."""
+def inlet_profile(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
+    """Face-wise inlet velocities on the meshed inlet patch, scaled so sum(U.Sf) = -Q exactly.
+
+    The profile (``cfd.inlet.type``) is a jet (plug flow through a disc of area ``valve_area``
+    about ``centre``), uniform, or parabolic over the equivalent circle of the inlet, directed
+    along the inward patch normal.
+
+    Parameters
+    ----------
+    case_dir : Path
+        A meshed case (ASCII ``constant/polyMesh``).
+    state : dict
+        Case description from :func:`render_case`.
+
+    Returns
+    -------
+    dict
+        ``patch`` (name), ``values`` ((F, 3) float, m/s, one per inlet face), ``n_faces``,
+        ``patch_area`` (m^2), ``direction`` (unit inward normal), ``centre`` (m),
+        ``flow_rate_target`` and ``flow_rate_discrete`` (m^3/s), ``flux_error_rel``,
+        ``covered_area`` (m^2, faces with inflow), ``peak_velocity`` (m/s).
+
+    Raises
+    ------
+    VCSInputError
+        When the jet disc contains no inlet face centre.
+    """
     inlet = state["cfd"]["inlet"]
     name = next(p["name"] for p in state["patches"] if p["role"] == "inlet")
     centres, sf = patch_geometry(case_dir, name)

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 
@@ -19,20 +21,38 @@ _HEADER_RE = re.compile(r"FoamFile\s*\{.*?\}", re.S)
 
 
 def _strip(text: str) -> str:
+    """OpenFOAM file text without comments and without its FoamFile header."""
     text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
     text = re.sub(r"//[^\n]*", "", text)
     return _HEADER_RE.sub("", text, count=1)
 
 
 def _read_text(path: Path) -> str:
+    """Text of an ASCII OpenFOAM file, stripped (VCSInputError for a binary one)."""
     data = Path(path).read_bytes()
     if b"format      binary" in data[:2000] or re.search(rb"format\s+binary", data[:2000]):
         raise VCSInputError(f"{path}: binary OpenFOAM file; the case must be written with writeFormat ascii")
     return _strip(data.decode("ascii", errors="replace"))
 
 
-def read_boundary(polymesh: Path) -> dict[str, dict]:
-    """constant/polyMesh/boundary -> {patch: {type, nFaces, startFace}}."""
+def read_boundary(polymesh: Path | str) -> dict[str, dict[str, Any]]:
+    """Read the patches of ``constant/polyMesh/boundary`` (ASCII).
+
+    Parameters
+    ----------
+    polymesh : Path or str
+        The ``constant/polyMesh`` folder.
+
+    Returns
+    -------
+    dict of str -> dict
+        Patch name -> {``type``: str, ``nFaces``: int, ``startFace``: int}, in file order.
+
+    Raises
+    ------
+    VCSInputError
+        When the file is binary.
+    """
     txt = _read_text(Path(polymesh) / "boundary")
     out = {}
     for m in re.finditer(r"(\w[\w.:-]*)\s*\{([^{}]*)\}", txt):
@@ -45,27 +65,82 @@ def read_boundary(polymesh: Path) -> dict[str, dict]:
 
 
 def _list_body(txt: str) -> tuple[int, str]:
+    """Length of the first OpenFOAM list ``N ( ... )`` in ``txt`` and the text after its '('."""
     m = re.search(r"(\d+)\s*\(", txt)
     if m is None:
         raise VCSInputError("no OpenFOAM list found")
     return int(m.group(1)), txt[m.end():]
 
 
-def read_points(polymesh: Path) -> np.ndarray:
+def read_points(polymesh: Path | str) -> NDArray[np.floating]:
+    """Read the mesh points of ``constant/polyMesh/points`` (ASCII).
+
+    Parameters
+    ----------
+    polymesh : Path or str
+        The ``constant/polyMesh`` folder.
+
+    Returns
+    -------
+    (P, 3) float
+        Point coordinates in the case's units (m).
+
+    Raises
+    ------
+    VCSInputError
+        When the file is binary or holds no list.
+    """
     n, body = _list_body(_read_text(Path(polymesh) / "points"))
     vals = np.array(re.findall(r"[-+0-9.eE]+", body[: body.rfind(")")]), dtype=float)
     return vals[: 3 * n].reshape(n, 3)
 
 
-def read_faces(polymesh: Path, start: int, count: int) -> list[np.ndarray]:
+def read_faces(polymesh: Path | str, start: int, count: int) -> list[NDArray[np.integer]]:
+    """Read ``count`` faces from ``start`` on of ``constant/polyMesh/faces`` (ASCII).
+
+    Parameters
+    ----------
+    polymesh : Path or str
+        The ``constant/polyMesh`` folder.
+    start : int
+        Index of the first face (a patch's ``startFace``).
+    count : int
+        Number of faces (a patch's ``nFaces``).
+
+    Returns
+    -------
+    list of (k,) int
+        Point indices of each face (k >= 3 corners, in OpenFOAM's order).
+
+    Raises
+    ------
+    VCSInputError
+        When the file is binary or holds no list.
+    """
     txt = _read_text(Path(polymesh) / "faces")
     n, body = _list_body(txt)
     faces = re.findall(r"\d+\s*\(([\d\s]+)\)", body)
     return [np.array(f.split(), dtype=int) for f in faces[start:start + count]]
 
 
-def face_geometry(points: np.ndarray, faces: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Face centres and area vectors, OpenFOAM style (triangle fan about the point average)."""
+def face_geometry(points: NDArray[np.floating],
+                  faces: list[NDArray[np.integer]]) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """Face centres and area vectors, OpenFOAM style (triangle fan about the point average).
+
+    Parameters
+    ----------
+    points : (P, 3) float, m
+        Mesh points.
+    faces : list of (k,) int
+        Point indices of each face.
+
+    Returns
+    -------
+    centres : (F, 3) float, m
+        Area-weighted face centres.
+    areas : (F, 3) float, m^2
+        Area vectors Sf (normal by the corner order, length = face area).
+    """
     centres = np.empty((len(faces), 3))
     areas = np.empty((len(faces), 3))
     for i, f in enumerate(faces):
@@ -86,7 +161,29 @@ def face_geometry(points: np.ndarray, faces: list[np.ndarray]) -> tuple[np.ndarr
     return centres, areas
 
 
-def patch_geometry(case_dir: Path, patch: str) -> tuple[np.ndarray, np.ndarray]:
+def patch_geometry(case_dir: Path | str, patch: str) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """Face centres and area vectors of one boundary patch of a case's ASCII polyMesh.
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        The OpenFOAM case.
+    patch : str
+        Patch name.
+
+    Returns
+    -------
+    centres : (F, 3) float, m
+    areas : (F, 3) float, m^2
+        Area vectors Sf, pointing out of the domain.
+
+    Raises
+    ------
+    KeyError
+        When the patch is not in the mesh.
+    VCSInputError
+        When a polyMesh file is binary.
+    """
     pm = Path(case_dir) / "constant" / "polyMesh"
     b = read_boundary(pm)
     if patch not in b:
@@ -103,12 +200,28 @@ _CONT_RE = re.compile(r"time step continuity errors : sum local = ([-+0-9.eE]+),
 _CONV_RE = re.compile(r"(SIMPLE solution converged in|reached convergence criteria|solution converged in)\D*(\d+)?", re.I)
 
 
-def parse_solver_log(path: str | Path) -> dict:
-    """Parse a simpleFoam log: per-iteration initial residuals (first solve per field and
-    iteration; vectors -> max over components, as OpenFOAM's residualControl does),
-    continuity errors and the residualControl convergence message."""
-    rows: list[dict] = []
-    cur: dict | None = None
+def parse_solver_log(path: str | Path) -> dict[str, Any]:
+    """Parse a simpleFoam log: initial residuals, continuity errors and convergence, per iteration.
+
+    Initial residuals are those of the first solve per field and iteration (non-orthogonal
+    correctors ignored); vectors give the max over components, as OpenFOAM's residualControl
+    does.
+
+    Parameters
+    ----------
+    path : Path or str
+        The log file.
+
+    Returns
+    -------
+    dict
+        ``rows``: list of dicts, one per iteration with data: ``time`` (the iteration), initial
+        residuals by field (``p``, ``U``, ...; dimensionless), ``cont_local``, ``cont_global``,
+        ``cont_cumulative`` when logged; ``converged_message``: bool, whether the
+        residualControl convergence message was printed.
+    """
+    rows: list[dict[str, Any]] = []
+    cur: dict[str, Any] | None = None
     converged_msg = False
     with open(path, "r", errors="replace") as fh:
         for line in fh:
@@ -145,8 +258,19 @@ def parse_solver_log(path: str | Path) -> dict:
 # -------------------------------------------------------------- postProcessing
 
 
-def read_dat(path: Path) -> np.ndarray:
-    """Numeric table of a function-object .dat file (comments '#', tabs/spaces, vectors in ())."""
+def read_dat(path: Path | str) -> NDArray[np.floating]:
+    """Numeric table of a function-object .dat file (comments '#', tabs/spaces, vectors in ()).
+
+    Parameters
+    ----------
+    path : Path or str
+        A ``postProcessing/<name>/<time>/*.dat`` file.
+
+    Returns
+    -------
+    (n, w) float
+        The numeric rows (time first), cut to the narrowest row; (0, 2) when there are none.
+    """
     data = []
     for line in Path(path).read_text(errors="replace").splitlines():
         s = line.strip()
@@ -163,8 +287,22 @@ def read_dat(path: Path) -> np.ndarray:
     return np.array([r[:width] for r in data])
 
 
-def last_function_value(case_dir: Path, name: str) -> float | None:
-    """Last value of postProcessing/<name>/<time>/*.dat (latest start time, last row)."""
+def last_function_value(case_dir: Path | str, name: str) -> float | None:
+    """Last value written by a function object (latest start time, last row).
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        The OpenFOAM case.
+    name : str
+        Function-object name (``postProcessing/<name>/<time>/*.dat``).
+
+    Returns
+    -------
+    float or None
+        Second column of the last row (in the function's units, e.g. m^3/s for a flow rate,
+        m^2/s^2 for kinematic pressure); None when nothing was written.
+    """
     root = Path(case_dir) / "postProcessing" / name
     files = sorted(root.glob("*/*.dat"), key=lambda p: (float(p.parent.name) if _isnum(p.parent.name) else 0.0, p.name))
     for f in reversed(files):
@@ -174,8 +312,23 @@ def last_function_value(case_dir: Path, name: str) -> float | None:
     return None
 
 
-def mean_function_value(case_dir: Path, name: str, after: float) -> float | None:
-    """Mean of postProcessing/<name>/*/*.dat rows with time > ``after`` (fallback averaging window)."""
+def mean_function_value(case_dir: Path | str, name: str, after: float) -> float | None:
+    """Mean value written by a function object after a given time (the fallback's averaging window).
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        The OpenFOAM case.
+    name : str
+        Function-object name (``postProcessing/<name>/*/*.dat``).
+    after : float
+        Only rows with time (iteration) > ``after`` count.
+
+    Returns
+    -------
+    float or None
+        Mean of the second column (the function's units); None when no row qualifies.
+    """
     root = Path(case_dir) / "postProcessing" / name
     rows = [read_dat(f) for f in root.glob("*/*.dat")]
     rows = [r for r in rows if r.shape[0] and r.shape[1] >= 2]
@@ -187,6 +340,7 @@ def mean_function_value(case_dir: Path, name: str, after: float) -> float | None
 
 
 def _isnum(s: str) -> bool:
+    """True when ``s`` parses as a float."""
     try:
         float(s)
         return True

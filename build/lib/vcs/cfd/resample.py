@@ -29,24 +29,54 @@ import json
 import logging
 import time as _time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
 from vcs.grid import GRID_DEFAULTS, grid_points, grid_to_vtk, local_frame, grid_axes, to_vcs_components
+
+if TYPE_CHECKING:
+    import pyvista as pv
+
+    from vcs.vessel import VesselModel
 
 log = logging.getLogger(__name__)
 
 # ---------------------------------------------------------------------------------------------
 # Reading a case
 # ---------------------------------------------------------------------------------------------
-def read_case(case_dir, *, time: float | None = None, wall_patch: str = "wall"):
+def read_case(case_dir: Path | str, *, time: float | None = None,
+              wall_patch: str = "wall") -> tuple[pv.UnstructuredGrid, dict[str, pv.PolyData], float]:
     """Internal mesh and boundary patches of a reconstructed OpenFOAM case at the last (or given) time.
 
-    Returns (internal: pyvista.UnstructuredGrid, patches: {name: pyvista.PolyData (triangulated)},
-    time: float), with cell and point (cell-to-point) data, in the case's units (metres). The
-    ``wall_patch`` must exist.
+    Read with pyvista's POpenFOAMReader (a ``case.foam`` marker file is created when missing),
+    with cell and point (cell-to-point) data, in the case's units (metres).
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        Reconstructed OpenFOAM case.
+    time : float or None
+        Time to read (the nearest written one); None: the last.
+    wall_patch : str
+        Name of the wall patch, which must exist (it is triangulated).
+
+    Returns
+    -------
+    internal : pyvista.UnstructuredGrid
+        The internal mesh with ``U`` (m/s) and ``p`` (kinematic, m^2/s^2).
+    patches : dict of str -> pyvista.PolyData
+        Non-empty boundary patches by name.
+    time : float
+        The time read.
+
+    Raises
+    ------
+    VCSInputError
+        When ``case_dir`` is not a case, has no time with fields, lacks the wall patch, or U or p.
     """
     import pyvista as pv
 
@@ -66,8 +96,9 @@ def read_case(case_dir, *, time: float | None = None, wall_patch: str = "wall"):
     reader.cell_to_point_creation = True
     reader.enable_all_patch_arrays()
     mb = reader.read()
-    internal = mb["internalMesh"]
-    boundary = mb["boundary"]
+    # the reader's MultiBlock: pyvista types its items as any dataset or None
+    internal = cast("pv.UnstructuredGrid", mb["internalMesh"])
+    boundary = cast("pv.MultiBlock | None", mb["boundary"])
     names = list(boundary.keys()) if boundary is not None else []
     if wall_patch not in names:
         raise VCSInputError(f"case '{case}' has no '{wall_patch}' patch (patches: {names})")
@@ -76,7 +107,8 @@ def read_case(case_dir, *, time: float | None = None, wall_patch: str = "wall"):
             raise VCSInputError(f"case '{case}' time {t:g} has no field '{name}'")
     patches = {}
     for name in names:
-        b = boundary[name]
+        # names is empty when boundary is None, which mypy cannot see
+        b = cast("pv.DataSet | None", boundary[name])  # type: ignore[index]
         if b is None or b.n_cells == 0:
             continue
         if not isinstance(b, pv.PolyData):
@@ -88,8 +120,13 @@ def read_case(case_dir, *, time: float | None = None, wall_patch: str = "wall"):
 # ---------------------------------------------------------------------------------------------
 # Sampling
 # ---------------------------------------------------------------------------------------------
-def _closest_on_surface(surface, points):
-    """Closest cell and barycentric weights of the closest point on a triangulated surface."""
+def _closest_on_surface(
+    surface: pv.PolyData, points: NDArray[np.floating],
+) -> tuple[NDArray[np.integer], NDArray[Any], NDArray[np.floating], NDArray[np.floating]]:
+    """Closest cell and barycentric weights of the closest point on a triangulated surface.
+
+    Returns (cell (P,), its corner point ids (P, 3), barycentric weights (P, 3), distance (P,)).
+    """
     import vtk
 
     loc = vtk.vtkStaticCellLocator()
@@ -131,11 +168,23 @@ def mls_interpolate(points: np.ndarray, data_points: np.ndarray, values: np.ndar
 
     Parameters
     ----------
-    points : (N, 3) float; data_points : (M, 3) float; values : (M,) or (M, c) float
+    points : (N, 3) float
+        Where to interpolate (any length unit, the same as ``data_points``).
+    data_points : (M, 3) float
+        Where the values are known (cell and face centres).
+    values : (M,) or (M, c) float
+        Data values (any unit).
+    k : int
+        Number of nearest data points per fit (>= 10).
+    quadratic_penalty : float
+        Ridge weight of the quadratic coefficients, relative to the mean diagonal (dimensionless).
+    tree : scipy.spatial.cKDTree or None
+        A tree of ``data_points`` to reuse; None builds one.
 
     Returns
     -------
     (N,) or (N, c) float
+        Interpolated values, in the unit of ``values``.
     """
     tree = tree or cKDTree(data_points)
     squeeze = values.ndim == 1
@@ -160,29 +209,48 @@ def mls_interpolate(points: np.ndarray, data_points: np.ndarray, values: np.ndar
     return out[:, 0] if squeeze else out
 
 
-def sample_mesh(internal, patches: dict, model, *, n_tau: int = GRID_DEFAULTS["n_tau"],
-                n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3,
-                rho_density: float = 1060.0, method: str = "mls", wall_patch: str = "wall",
-                wss_name: str = "wallShearStress") -> dict:
+def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: VesselModel, *,
+                n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
+                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
+                method: str = "mls", wall_patch: str = "wall", wss_name: str = "wallShearStress") -> dict[str, Any]:
     """Sample U, p (internal mesh) and WSS (wall patch) on the model's grid; see the module doc.
 
     Parameters
     ----------
-    internal : pyvista.DataSet with cell arrays ``U`` (m/s) and ``p`` (kinematic, m2/s2) (and the
-        same as point arrays for ``method="probe"``)
-    patches : {name: pyvista.PolyData} boundary patches with face (cell) values of U and p where
-        known (used as data by ``"mls"``); ``patches[wall_patch]`` (triangles) carries
-        ``wallShearStress`` (kinematic) as point or cell data. Without a wall patch WSS is skipped.
-    model : VesselModel (mm)
-    rho_scale : case length unit per mm (1e-3: the case is in metres)
-    rho_density : kg/m3, to convert the kinematic p and WSS to Pa
-    method : ``"mls"`` (default): quadratic moving least squares on cell and boundary-face centres
+    internal : pyvista.DataSet
+        Internal mesh with cell arrays ``U`` (m/s) and ``p`` (kinematic, m^2/s^2) (and the same as
+        point arrays for ``method="probe"``).
+    patches : dict of str -> pyvista.PolyData
+        Boundary patches with face (cell) values of U and p where known (used as data by
+        ``"mls"``); ``patches[wall_patch]`` (triangles) carries ``wallShearStress`` (kinematic,
+        m^2/s^2) as point or cell data. Without a wall patch WSS is skipped.
+    model : VesselModel
+        The vessel (mm) with a wall model.
+    n_tau, n_theta, n_rho : int
+        Grid node counts, see :func:`vcs.grid.grid_axes`.
+    rho_scale : float
+        Case length unit per mm (1e-3: the case is in metres).
+    rho_density : float, kg/m^3
+        Fluid density, to convert the kinematic p and WSS to Pa.
+    method : {"mls", "probe"}
+        ``"mls"`` (default): quadratic moving least squares on cell and boundary-face centres
         (:func:`mls_interpolate`); ``"probe"``: VTK probe of the cell-to-point data (trilinear in
         the containing cell; flattens peaks by a few % on coarse meshes).
+    wall_patch : str
+        Name of the wall patch in ``patches``.
+    wss_name : str
+        Name of the wall-shear-stress array on the wall patch.
 
     Returns
     -------
-    dict of arrays (the content of fields.npz), see :func:`sample_case`.
+    dict of str -> array
+        The content of fields.npz, see :func:`sample_case` (without ``time``, ``read_time_s``,
+        ``n_cells``).
+
+    Raises
+    ------
+    VCSInputError
+        For an unknown method, a model without a wall model, or a wall patch without WSS.
     """
     import pyvista as pv
 
@@ -204,13 +272,13 @@ def sample_mesh(internal, patches: dict, model, *, n_tau: int = GRID_DEFAULTS["n
         U = np.asarray(probe.point_data["U"], float).copy()
         p = np.asarray(probe.point_data["p"], float).copy()
     else:
-        X, VU, Vp = [centres], [cell_U], [cell_p]
+        Xs, VU, Vp = [centres], [cell_U], [cell_p]
         for b in patches.values():
             if "U" in b.cell_data and "p" in b.cell_data:
-                X.append(np.asarray(b.cell_centers().points))
+                Xs.append(np.asarray(b.cell_centers().points))
                 VU.append(np.asarray(b.cell_data["U"], float))
                 Vp.append(np.asarray(b.cell_data["p"], float))
-        X = np.concatenate(X)
+        X = np.concatenate(Xs)
         vals = mls_interpolate(P, X, np.column_stack([np.concatenate(VU), np.concatenate(Vp)]))
         U, p = vals[:, :3], vals[:, 3]
     # points outside the CFD mesh: no-slip on the wall, nearest cell inside the lumen
@@ -268,19 +336,28 @@ def sample_mesh(internal, patches: dict, model, *, n_tau: int = GRID_DEFAULTS["n
     return out
 
 
-def sample_case(case_dir, model, *, n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
-                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
-                time: float | None = None, method: str = "mls") -> dict:
-    """Sample a finished OpenFOAM case on the patient's (tau, theta, rho_n) grid.
+def sample_case(case_dir: Path | str, model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
+                n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"],
+                rho_scale: float = 1e-3, rho_density: float = 1060.0, time: float | None = None,
+                method: str = "mls") -> dict[str, Any]:
+    """Sample a finished OpenFOAM case on the patient's (tau, theta, rho_n) grid (Section 2.4.2).
 
     Parameters
     ----------
-    case_dir : reconstructed case (metres) with U, p, wallShearStress at the last time
-    model : VesselModel (mm) whose Eq. 8 wall the case was built from
-    n_tau, n_theta, n_rho : grid size; the same for every patient of an atlas
-    rho_scale : case length units per mm (1e-3 for a case in metres)
-    rho_density : fluid density in kg/m3 (kinematic p and WSS -> Pa)
-    method : interpolation of U and p, see :func:`sample_mesh`
+    case_dir : Path or str
+        Reconstructed case (metres) with U, p, wallShearStress at the last time.
+    model : VesselModel
+        The vessel (mm) whose Eq. 8 wall the case was built from.
+    n_tau, n_theta, n_rho : int
+        Grid node counts; the same for every patient of an atlas.
+    rho_scale : float
+        Case length units per mm (1e-3 for a case in metres).
+    rho_density : float, kg/m^3
+        Fluid density (kinematic p and WSS -> Pa).
+    time : float or None
+        Time to read (the nearest written one); None: the last.
+    method : {"mls", "probe"}
+        Interpolation of U and p, see :func:`sample_mesh`.
 
     Returns
     -------
@@ -311,14 +388,36 @@ COUNT_KEYS = ("n_points", "n_outside_mesh", "n_wall_noslip", "n_wall_outside_mes
               "read_time_s", "interpolation_time_s", "sample_time_s", "method")
 
 
-def summary(fields: dict) -> dict:
-    """Counts and timings of a resampling as plain JSON values."""
+def summary(fields: dict[str, Any]) -> dict[str, Any]:
+    """Counts and timings of a resampling as plain JSON values.
+
+    Parameters
+    ----------
+    fields : dict of str -> array
+        Output of :func:`sample_case` or :func:`load_fields`.
+
+    Returns
+    -------
+    dict
+        The entries of :data:`COUNT_KEYS` present in ``fields``, as Python scalars (distances in
+        case units, times in s).
+    """
     return {k: fields[k].item() for k in COUNT_KEYS if k in fields}
 
 
-def write_fields(fields: dict, npz_path, *, vtu_path=None) -> None:
-    """Write ``fields.npz`` (all arrays) and optionally a VTU of the grid (case units) for ParaView,
-    plus ``<npz stem>.json`` with the counts and timings next to the npz."""
+def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path | str | None = None) -> None:
+    """Write ``fields.npz`` (all arrays), ``<npz stem>.json`` (counts and timings) and optionally a VTU.
+
+    Parameters
+    ----------
+    fields : dict of str -> array
+        Output of :func:`sample_case`.
+    npz_path : Path or str
+        The ``.npz`` file (compressed); the ``.json`` summary goes next to it.
+    vtu_path : Path, str or None
+        A VTU of the grid (case units) with U, U_vcs, p, p_kinematic, rho_n and WSS (on the
+        rho_n = 1 layer, zero inside), for ParaView.
+    """
     npz_path = Path(npz_path)
     np.savez_compressed(npz_path, **fields)
     npz_path.with_suffix(".json").write_text(json.dumps(summary(fields), indent=1, sort_keys=True) + "\n")
@@ -333,7 +432,18 @@ def write_fields(fields: dict, npz_path, *, vtu_path=None) -> None:
         grid_to_vtk(fields["points"], data).save(str(vtu_path))
 
 
-def load_fields(path) -> dict:
-    """fields.npz -> dict of arrays."""
+def load_fields(path: Path | str) -> dict[str, NDArray[Any]]:
+    """Read a fields.npz written by :func:`write_fields`.
+
+    Parameters
+    ----------
+    path : Path or str
+        The ``.npz`` file.
+
+    Returns
+    -------
+    dict of str -> array
+        Every array of the file (see :func:`sample_case` for names, shapes and units).
+    """
     with np.load(path) as z:
         return {k: z[k] for k in z.files}

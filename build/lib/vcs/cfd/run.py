@@ -11,8 +11,10 @@ import shutil
 import subprocess
 import time
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vcs.cfd.case import CASE_JSON, inlet_profile, patch_role, render_files
 from vcs.cfd.foamfiles import last_function_value, mean_function_value, parse_solver_log, patch_geometry
@@ -22,7 +24,9 @@ from vcs.cfd.openfoam import detect_openfoam, foam_env
 
 
 class _Runner:
-    def __init__(self, case_dir: Path, timings: dict, timeout: float | None):
+    """Runs OpenFOAM utilities in a case, each logged to ``logs/log.<name>`` and timed."""
+
+    def __init__(self, case_dir: Path, timings: dict[str, float], timeout: float | None) -> None:
         self.case = case_dir
         self.logs = case_dir / "logs"
         self.logs.mkdir(exist_ok=True)
@@ -30,7 +34,8 @@ class _Runner:
         self.timeout = timeout
         self.env = foam_env()
 
-    def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess:
+    def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess[bytes]:
+        """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9."""
         cmd = list(args)
         if ranks > 1:
             mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
@@ -55,6 +60,7 @@ class _Runner:
 
 
 def _latest_time(case_dir: Path) -> str | None:
+    """Name of the case's largest numeric time folder, or None."""
     times = []
     for p in case_dir.iterdir():
         if p.is_dir():
@@ -66,6 +72,7 @@ def _latest_time(case_dir: Path) -> str | None:
 
 
 def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
+    """(mesh OK, number of cells, why not) from a checkMesh log."""
     txt = log.read_text(errors="replace")
     m = re.search(r"^\s*cells:\s+(\d+)", txt, re.M)
     cells = int(m.group(1)) if m else None
@@ -78,7 +85,8 @@ def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
     return False, cells, why
 
 
-def _read_patch_vectors(field_file: Path, patch: str) -> np.ndarray | None:
+def _read_patch_vectors(field_file: Path, patch: str) -> NDArray[np.floating] | None:
+    """A patch's vector values in an ASCII field file ((n, 3), or (1, 3) when uniform), or None."""
     txt = field_file.read_text(errors="replace")
     bf = txt.find("boundaryField")
     m = re.search(rf"\b{re.escape(patch)}\s*\{{[^{{}}]*?value\s+nonuniform\s+List<vector>\s*(\d+)\s*\(", txt[bf:], re.S)
@@ -91,7 +99,8 @@ def _read_patch_vectors(field_file: Path, patch: str) -> np.ndarray | None:
     return np.array([[float(x) for x in v.split()] for v in vals])
 
 
-def _write_residuals(case_dir: Path, rows: list[dict]) -> None:
+def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
+    """Write ``residuals.csv`` and (best effort) ``residuals.png`` of the parsed log rows."""
     import csv
     keys = ["iteration", "p", "U", "cont_local", "cont_global", "cont_cumulative"]
     with open(case_dir / "residuals.csv", "w", newline="") as fh:
@@ -129,13 +138,30 @@ def _use_means(time_dir: Path) -> None:
             (time_dir / f).write_text(txt)
 
 
-def run_case(case_dir, *, ranks: int | None = None) -> dict:
+def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any]:
     """Mesh and solve a rendered case; writes ``status.json``, ``residuals.csv/png``, ``logs/log.*``.
 
     Steps: blockMesh, snappyHexMesh -overwrite, checkMesh (failure stops), inlet profile,
     [decomposePar], simpleFoam start-up (first order) then main stage (residualControl);
     if not converged and solver.fallback == 'average': averaging stage with fieldAverage whose
-    means replace U and p; [reconstructPar]; wallShearStress."""
+    means replace U and p; [reconstructPar]; wallShearStress. Failures do not raise: they are
+    reported in the status (``reason``, ``failed_log``).
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        A case written by :func:`vcs.cfd.case.render_case`.
+    ranks : int or None
+        MPI ranks (1: serial); None: ``cfd.ranks`` of the case.
+
+    Returns
+    -------
+    dict
+        The status (also ``status.json``): ``converged``, ``reason``, ``iterations``,
+        ``final_residuals``, ``cells``, ``mass_imbalance`` (relative), ``flow_rates`` (m^3/s),
+        ``patch_pressure`` (kinematic, m^2/s^2), ``pressure_drop`` (m^2/s^2 and Pa),
+        ``wall_shear_stress_Pa``, ``timings_s`` (s), the inlet profile summary and more.
+    """
     case_dir = Path(case_dir).resolve()
     state = json.loads((case_dir / CASE_JSON).read_text())
     cfd = state["cfd"]
@@ -146,9 +172,9 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
     n[int(np.argmax(hi - lo))] = ranks
     state["decomposition_n"] = n
     state["cfd"]["ranks"] = ranks
-    timings: dict = {}
+    timings: dict[str, float] = {}
     installed, version = detect_openfoam()
-    status: dict = {
+    status: dict[str, Any] = {
         "case": str(case_dir), "flavour": state["flavour"], "openfoam_version": version, "ranks": ranks,
         "converged": False, "criterion": f"initial residuals of p and U < {sol['tolerance']:g}",
         "iterations": 0, "final_residuals": {}, "mass_imbalance": None, "cells": None,
@@ -157,7 +183,8 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
         "rho": cfd["physics"]["rho"], "nu": cfd["physics"]["nu"],
     }
 
-    def finish(reason: str | None = None, failed_log: str | None = None) -> dict:
+    def finish(reason: str | None = None, failed_log: str | None = None) -> dict[str, Any]:
+        """Record the reason and the failed utility's log, write status.json, return the status."""
         if reason:
             status["reason"] = reason
         if failed_log:  # the log of the utility that failed (absolute path), for the user and the atlas
@@ -255,7 +282,7 @@ def run_case(case_dir, *, ranks: int | None = None) -> dict:
             return finish((status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed",
                           "reconstructPar")
     if averaged:
-        tdir = case_dir / _latest_time(case_dir)
+        tdir = case_dir / cast(str, _latest_time(case_dir))  # the averaging stage wrote a time folder
         _use_means(tdir)
         run(["simpleFoam", "-postProcess", "-func", "wallShearStress", "-latestTime"], "wallShearStress")
         status["criterion_used"] = "pseudo_steady_time_average"
@@ -289,6 +316,7 @@ def _utility_failure(case_dir: Path, utility: str) -> str:
 
 
 def _solver_failure(log: Path, stage: str) -> str:
+    """One-line reason for a failed simpleFoam stage from the end of its log."""
     txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
     m = re.search(r"(FOAM FATAL[^\n]*\n(?:[^\n]*\n){0,6})", txt)
     if "Floating point exception" in txt or "sigFpe" in txt:
@@ -298,7 +326,7 @@ def _solver_failure(log: Path, stage: str) -> str:
     return f"simpleFoam ({stage}) exited with an error (see logs/{log.name})"
 
 
-def _pyfoam_check(log: Path) -> dict | None:
+def _pyfoam_check(log: Path) -> dict[str, Any] | None:
     """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration)."""
     try:
         from PyFoam.LogAnalysis.BoundingLogAnalyzer import BoundingLogAnalyzer
@@ -314,8 +342,9 @@ def _pyfoam_check(log: Path) -> dict | None:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
-def _collect(case_dir: Path, status: dict, logs: list[Path], state: dict) -> None:
-    rows: list[dict] = []
+def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: dict[str, Any]) -> None:
+    """Add residuals, iterations, flow rates, mass imbalance, pressure drop and WSS to ``status``."""
+    rows: list[dict[str, Any]] = []
     stage_iters = {}
     for lg in logs:
         if lg.exists():
@@ -338,7 +367,8 @@ def _collect(case_dir: Path, status: dict, logs: list[Path], state: dict) -> Non
     rho = float(state["cfd"]["physics"]["rho"])
     avg_from = status.get("averaging_from")
 
-    def fo_value(name: str):
+    def fo_value(name: str) -> float | None:
+        """Value of function object ``name`` (window mean in the fallback, else last)."""
         # fallback: mean over the averaging window (consistent with UMean/pMean); else last iteration
         if avg_from is not None:
             return mean_function_value(case_dir, name, avg_from)
