@@ -1,6 +1,7 @@
 """Only one thing pyproject.toml cannot say: the OpenFOAM case templates live at the top of the
 repository (templates/openfoam/, the project's layout) and ship in the wheel as package data
 vcs/cfd/templates/openfoam/ (found by vcs.cfd.openfoam.template_dir())."""
+
 import shutil
 from pathlib import Path
 

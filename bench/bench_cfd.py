@@ -8,6 +8,7 @@
 Prints one row per STL: cells, snappyHexMesh time, solver iterations and time, converged (+ reason).
 Cases are kept in --workdir (default: a temporary directory) with their status.json and logs/.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,13 @@ def main(argv=None) -> int:
     ap.add_argument("--inlet", choices=["jet", "uniform", "parabolic"])
     ap.add_argument("--max-iterations", type=int)
     ap.add_argument("--flavour", choices=["esi", "org10"])
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="any DEFAULTS entry, e.g. solver.startup_iterations=200")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="any DEFAULTS entry, e.g. solver.startup_iterations=200",
+    )
     ap.add_argument("--workdir", type=Path)
     ap.add_argument("--json", type=Path, help="also write all status dicts to this file")
     a = ap.parse_args(argv)
@@ -59,11 +65,16 @@ def main(argv=None) -> int:
     stls = list(a.stl)
     if a.demo_tube:
         from vcs.phantoms.analytic import write_closed_tube_stl
-        stls.append(write_closed_tube_stl(work / "demo_tube.stl", radius=0.01, length=0.2, n_z=100, axis=(0.03, 0.02, 1.0)))
+
+        stls.append(
+            write_closed_tube_stl(work / "demo_tube.stl", radius=0.01, length=0.2, n_z=100, axis=(0.03, 0.02, 1.0))
+        )
     if not stls:
         ap.error("give STL files or --demo-tube")
 
-    hdr = f"{'case':<24} {'cells':>9} {'snappy_s':>9} {'iters':>6} {'solver_s':>9} {'ranks':>5} {'converged':>9}  reason"
+    hdr = (
+        f"{'case':<24} {'cells':>9} {'snappy_s':>9} {'iters':>6} {'solver_s':>9} {'ranks':>5} {'converged':>9}  reason"
+    )
     print(f"# workdir {work}", flush=True)
     print(hdr)
     print("-" * len(hdr), flush=True)
@@ -75,9 +86,12 @@ def main(argv=None) -> int:
         t = st.get("timings_s", {})
         solver_s = sum(v for k, v in t.items() if k.startswith("simpleFoam"))
         cells = st.get("cells")
-        print(f"{Path(stl).stem[:24]:<24} {cells if cells is not None else '-':>9} {t.get('snappyHexMesh', 0):>9.1f} "
-              f"{st.get('iterations', 0):>6} {solver_s:>9.1f} {st.get('ranks', a.ranks):>5} "
-              f"{str(st.get('converged')):>9}  {st.get('reason') or ''}", flush=True)
+        print(
+            f"{Path(stl).stem[:24]:<24} {cells if cells is not None else '-':>9} {t.get('snappyHexMesh', 0):>9.1f} "
+            f"{st.get('iterations', 0):>6} {solver_s:>9.1f} {st.get('ranks', a.ranks):>5} "
+            f"{str(st.get('converged')):>9}  {st.get('reason') or ''}",
+            flush=True,
+        )
         out.append(st)
     if a.json:
         a.json.write_text(json.dumps(out, indent=2, default=float))

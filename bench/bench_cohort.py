@@ -11,6 +11,7 @@ Target: parallel efficiency >= 0.9 on 2 cores (one serial case per core).
 The phantoms (vcs_phantom) are generated before the timed run, so that the timed run is the
 per-patient chain + atlas only. Runs in a fresh directory (default: a temporary one).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,8 +48,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4, help="patients (aorta phantoms, seeds 0..n-1)")
     ap.add_argument("--cores", type=int, default=2, help="snakemake --cores")
-    ap.add_argument("--configfile", default=str(REPO / "config" / "ci.yaml"),
-                    help="config merged over config/config.yaml (default: the CI-sized config/ci.yaml)")
+    ap.add_argument(
+        "--configfile",
+        default=str(REPO / "config" / "ci.yaml"),
+        help="config merged over config/config.yaml (default: the CI-sized config/ci.yaml)",
+    )
     ap.add_argument("--workdir", help="run here instead of a temporary directory (kept)")
     args = ap.parse_args(argv)
 
@@ -59,9 +63,20 @@ def main(argv=None) -> int:
     sheet.write_text("\n".join(rows) + "\n")
     override = work / "bench.yaml"
     override.write_text(yaml.safe_dump({"patients": str(sheet)}))
-    base = ["-s", str(REPO / "Snakefile"), "-d", str(work), "--profile", str(REPO / "profiles" / "local"),
-            "--cores", str(args.cores), "--configfile", str(REPO / "config" / "config.yaml"),
-            str(Path(args.configfile).resolve()), str(override)]
+    base = [
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(work),
+        "--profile",
+        str(REPO / "profiles" / "local"),
+        "--cores",
+        str(args.cores),
+        "--configfile",
+        str(REPO / "config" / "config.yaml"),
+        str(Path(args.configfile).resolve()),
+        str(override),
+    ]
     phantoms = [f"results/demo/aorta_seed{s}.stl" for s in range(args.n)]
     # targets before the options: `--quiet` takes optional values
     subprocess.run([str(SNAKEMAKE), *phantoms, *base, "--quiet"], check=True, cwd=work)
@@ -94,7 +109,10 @@ def main(argv=None) -> int:
         print(f"share of job time outside OpenFOAM {1 - foam_s / jobs_s:6.1%}")
     print(f"scheduler/idle share of core time  {max(0.0, 1 - jobs_s / (args.cores * wall)):6.1%}")
     print("\nper patient (status.json timings, Snakemake benchmarks):")
-    print("| patient | cells | snappyHexMesh s | iterations | simpleFoam s | converged | resampling s | resampling / solver |")
+    print(
+        "| patient | cells | snappyHexMesh s | iterations | simpleFoam s | converged | resampling s "
+        "| resampling / solver |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for pid, st in statuses.items():
         t = st.get("timings_s", {})
@@ -102,8 +120,10 @@ def main(argv=None) -> int:
         solver = sum(float(v) for k, v in t.items() if k.startswith("simpleFoam"))
         sample = bench.get("fields_sample", {}).get(pid)
         ratio = f"{sample / solver:.1%}" if sample is not None and solver > 0 else "-"
-        print(f"| {pid} | {st.get('cells')} | {snappy:.1f} | {st.get('iterations')} | {solver:.1f} | "
-              f"{st.get('converged')} | {sample if sample is None else round(sample, 1)} | {ratio} |")
+        print(
+            f"| {pid} | {st.get('cells')} | {snappy:.1f} | {st.get('iterations')} | {solver:.1f} | "
+            f"{st.get('converged')} | {sample if sample is None else round(sample, 1)} | {ratio} |"
+        )
     return r.returncode
 
 

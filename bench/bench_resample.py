@@ -6,6 +6,7 @@
 Prints the read / interpolation / total resampling times, the grid and mesh sizes, the counts of
 points outside the CFD mesh, and the solver's wall time from the case's status.json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,12 +25,18 @@ def tube_case(tmp: Path):
     """The tests' straight-tube Hagen-Poiseuille case and its model (tests/vcs/test_resample.py)."""
     sys.path.insert(0, str(ROOT / "tests" / "vcs"))
     from test_resample import AXIS, LENGTH_MM, RADIUS_MM, U_MEAN, straight_model
-    from vcs.phantoms.analytic import write_closed_tube_stl
-    from vcs.cfd import render_case, run_case
 
-    stl = write_closed_tube_stl(tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS)
-    cfg = {"mesh": {"cell_size": 1.25e-3}, "inlet": {"type": "parabolic", "flow_rate": U_MEAN * np.pi * (RADIUS_MM * 1e-3) ** 2},
-           "solver": {"max_iterations": 800, "startup_iterations": 50, "fallback": "none"}}
+    from vcs.cfd import render_case, run_case
+    from vcs.phantoms.analytic import write_closed_tube_stl
+
+    stl = write_closed_tube_stl(
+        tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS
+    )
+    cfg = {
+        "mesh": {"cell_size": 1.25e-3},
+        "inlet": {"type": "parabolic", "flow_rate": U_MEAN * np.pi * (RADIUS_MM * 1e-3) ** 2},
+        "solver": {"max_iterations": 800, "startup_iterations": 50, "fallback": "none"},
+    }
     render_case(tmp / "case", stl, cfg, flavour="esi")
     run_case(tmp / "case", ranks=1)
     return tmp / "case", straight_model()
@@ -63,14 +70,24 @@ def main(argv=None) -> int:
             times.append(time.perf_counter() - t0)
         status = json.loads((case / "status.json").read_text()) if (case / "status.json").is_file() else {}
     solver = status.get("timings_s", {}).get("total")
-    print(f"case: {case}  cells: {int(f['n_cells'])}  grid: {a.n_tau} x {a.n_theta} x {a.n_rho} = {int(f['n_points'])} points"
-          f"  method: {a.method}")
-    print(f"resample: best {min(times):.3f} s of {a.repeat} (read {float(f['read_time_s']):.3f} s, "
-          f"U/p interpolation {float(f['interpolation_time_s']):.3f} s, total sampling {float(f['sample_time_s']):.3f} s)")
-    print(f"outside the CFD mesh: {int(f['n_outside_mesh'])} points ({int(f['n_wall_outside_mesh'])} on the wall, "
-          f"{int(f['n_interior_nearest'])} interior -> nearest cell)")
+    print(
+        f"case: {case}  cells: {int(f['n_cells'])}  "
+        f"grid: {a.n_tau} x {a.n_theta} x {a.n_rho} = {int(f['n_points'])} points"
+        f"  method: {a.method}"
+    )
+    print(
+        f"resample: best {min(times):.3f} s of {a.repeat} (read {float(f['read_time_s']):.3f} s, "
+        f"U/p interpolation {float(f['interpolation_time_s']):.3f} s, total sampling {float(f['sample_time_s']):.3f} s)"
+    )
+    print(
+        f"outside the CFD mesh: {int(f['n_outside_mesh'])} points ({int(f['n_wall_outside_mesh'])} on the wall, "
+        f"{int(f['n_interior_nearest'])} interior -> nearest cell)"
+    )
     if solver:
-        print(f"solver (status.json timings_s.total): {solver:.1f} s -> resampling is {100 * min(times) / solver:.1f}% of it")
+        print(
+            f"solver (status.json timings_s.total): {solver:.1f} s -> "
+            f"resampling is {100 * min(times) / solver:.1f}% of it"
+        )
     else:
         print("solver time: not in status.json")
     return 0

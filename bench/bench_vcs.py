@@ -4,6 +4,7 @@ to_vcs throughput.
 Prints a Markdown table; run with `.venv/bin/python bench/bench_vcs.py`. Meshes from
 ../shared/data are used when present; an aorta phantom is always used.
 """
+
 from __future__ import annotations
 
 import platform
@@ -33,8 +34,11 @@ def best_of(fn, n=3):
 def cases():
     if DATA.is_dir():
         d = DATA / "aortacfd_patient1"
-        yield "AortaCFD thoracic aorta", read_surface(d / "wall_aorta.stl"), {
-            "inlet_cap": d / "inlet.stl", "outlet_cap": d / "outlet4.stl"}
+        yield (
+            "AortaCFD thoracic aorta",
+            read_surface(d / "wall_aorta.stl"),
+            {"inlet_cap": d / "inlet.stl", "outlet_cap": d / "outlet4.stl"},
+        )
         yield "SimVascular segment", read_surface(DATA / "simvascular_aorta_segment_open.vtp"), {}
     try:
         from vcs.phantoms import make_phantom
@@ -49,17 +53,19 @@ def machine() -> str:
     """CPU model, cores, memory and load, for the figures' context."""
     import os
 
-    cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")),
-               platform.machine())
+    cpu = next(
+        (ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")), platform.machine()
+    )
     mem = next((int(ln.split()[1]) // 1024**2 for ln in open("/proc/meminfo") if ln.startswith("MemTotal")), 0)
-    return (f"{cpu}, {os.cpu_count()} cores, {mem} GB, load {os.getloadavg()[0]:.1f}, "
-            f"Python {platform.python_version()}")
+    return f"{cpu}, {os.cpu_count()} cores, {mem} GB, load {os.getloadavg()[0]:.1f}, Python {platform.python_version()}"
 
 
 def main():
     print(f"machine: {machine()}; best of 3")
-    print("| mesh | triangles | VCS build (centerline+frame) s | of which lumen path search s "
-          "| wall fit K=19 R=15 s | whole `vcs fit` s |")
+    print(
+        "| mesh | triangles | VCS build (centerline+frame) s | of which lumen path search s "
+        "| wall fit K=19 R=15 s | whole `vcs fit` s |"
+    )
     print("|---|---|---|---|---|---|")
     last = None
     for name, surf, opts in cases():

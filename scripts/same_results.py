@@ -12,6 +12,7 @@ and compares every ``model.json``, ``fit_report.json`` (timings left out), ``wal
 phantom STL byte by byte, and every ``fields.npz`` array by array (dtype, shape and bits; timings ``*_time_s`` left
 out; an npz archive also stores its write time, so its bytes differ between runs).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,8 +31,10 @@ REAL = {
     "simvascular_capped": ("simvascular_aorta_segment_capped.vtp", []),
     "vmtk_closed": ("vmtk_aorta_segment_closed.stl", ["--inlet=219.0,290.0,25.0", "--outlet=221.3,146.5,21.7"]),
     "vmtk_bifurcation": ("vmtk_aorta_bifurcation_open.stl", ["--inlet=221,177.8,21.3", "--outlet=210.2,102.9,30.8"]),
-    "aortacfd": ("aortacfd_patient1/wall_aorta.stl", ["--inlet-cap", "aortacfd_patient1/inlet.stl",
-                                                      "--outlet-cap", "aortacfd_patient1/outlet4.stl"]),
+    "aortacfd": (
+        "aortacfd_patient1/wall_aorta.stl",
+        ["--inlet-cap", "aortacfd_patient1/inlet.stl", "--outlet-cap", "aortacfd_patient1/outlet4.stl"],
+    ),
 }
 BYTE_FILES = ("model.json", "wall.stl")
 VOLATILE_REPORT_KEYS = ("timings_s", "mesh")  # wall-clock times; the input path

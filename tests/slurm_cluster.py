@@ -73,9 +73,11 @@ REQUIRED_BINARIES = ("slurmctld", "slurmd", "munged", "sbatch", "squeue", "sinfo
 # accounting-free cluster (sacct does not work without slurmdbd; status must come
 # from squeue, which needs MinJobAge >= 3 * init-seconds-before-status-checks).
 SNAKEMAKE_SLURM_ARGS = (
-    "--slurm-status-command", "squeue",
+    "--slurm-status-command",
+    "squeue",
     "--slurm-no-account",
-    "--slurm-init-seconds-before-status-checks", "2",
+    "--slurm-init-seconds-before-status-checks",
+    "2",
 )
 
 
@@ -104,9 +106,7 @@ class SlurmCluster:
 
     def run(self, *args: str, timeout: float = 30, check: bool = True) -> subprocess.CompletedProcess:
         """Run a slurm client command against this cluster."""
-        return subprocess.run(
-            list(args), env=self.env, capture_output=True, text=True, timeout=timeout, check=check
-        )
+        return subprocess.run(list(args), env=self.env, capture_output=True, text=True, timeout=timeout, check=check)
 
     def log_tails(self, n: int = 30) -> str:
         out = []
@@ -132,8 +132,7 @@ def missing_requirements() -> str | None:
     """Reason why no cluster can be started here, or None."""
     missing = [b for b in REQUIRED_BINARIES if _which(b) is None]
     if missing:
-        return ("slurm/munge binaries missing: " + ", ".join(missing)
-                + " (Debian: apt-get install -y slurm-wlm munge)")
+        return "slurm/munge binaries missing: " + ", ".join(missing) + " (Debian: apt-get install -y slurm-wlm munge)"
     if os.geteuid() != 0:
         return "starting slurmctld/slurmd needs root (SlurmUser=root)"
     return None
@@ -304,12 +303,13 @@ CLIENT_CONF_LINK = Path("/run/slurm/conf")
 SYSTEM_CONF = Path("/etc/slurm/slurm.conf")
 
 
-def _link_client_conf(cluster: "SlurmCluster") -> None:
+def _link_client_conf(cluster: SlurmCluster) -> None:
     with _registry_locked():
         if SYSTEM_CONF.exists():
             cluster.nested_srun_problem = (
                 f"{SYSTEM_CONF} exists: srun inside Snakemake SLURM jobs (which loses "
-                "SLURM_CONF) would talk to that cluster, not the test cluster")
+                "SLURM_CONF) would talk to that cluster, not the test cluster"
+            )
             return
         link = CLIENT_CONF_LINK
         if link.is_symlink():
@@ -319,14 +319,15 @@ def _link_client_conf(cluster: "SlurmCluster") -> None:
         if link.exists() or link.is_symlink():
             cluster.nested_srun_problem = (
                 f"{link} is in use (another test cluster or a configless slurmd): "
-                "srun inside Snakemake SLURM jobs cannot find this cluster's config")
+                "srun inside Snakemake SLURM jobs cannot find this cluster's config"
+            )
             return
         link.parent.mkdir(parents=True, exist_ok=True)
         link.symlink_to(cluster.rundir)
         cluster.conf_link = link
 
 
-def _unlink_client_conf(cluster: "SlurmCluster") -> None:
+def _unlink_client_conf(cluster: SlurmCluster) -> None:
     link = cluster.conf_link
     if link is None:
         return
@@ -344,8 +345,9 @@ def _munge_key(path: Path) -> None:
     if path.exists():
         return
     if _which("mungekey"):
-        subprocess.run([_which("mungekey"), "--create", "--keyfile", str(path)], check=True,
-                       capture_output=True, timeout=30)
+        subprocess.run(
+            [_which("mungekey"), "--create", "--keyfile", str(path)], check=True, capture_output=True, timeout=30
+        )
     else:  # old munge without mungekey (create-munge-key only writes /etc/munge)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "wb") as fh:
@@ -354,8 +356,11 @@ def _munge_key(path: Path) -> None:
 
 
 def _client_env(conf: Path) -> dict:
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith(("SLURM_", "SBATCH_", "SRUN_", "SALLOC_", "SQUEUE_", "SINFO_"))}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith(("SLURM_", "SBATCH_", "SRUN_", "SALLOC_", "SQUEUE_", "SINFO_"))
+    }
     env["SLURM_CONF"] = str(conf)
     return env
 
@@ -440,9 +445,16 @@ def start_cluster(workdir: Path, timeout: float = 90) -> SlurmCluster:
     # the conf lives in workdir; add a copy in rundir so the marker is in the daemons' argv
     ctld_port, slurmd_port = _free_ports(2)
     conf_text = SLURM_CONF_TEMPLATE.format(
-        cluster_name=CLUSTER_NAME, nodename=nodename, ctld_port=ctld_port,
-        slurmd_port=slurmd_port, munge_socket=munge_socket, state_dir=state_dir,
-        spool_dir=spool_dir, workdir=workdir, topology=topology, real_memory=real_memory,
+        cluster_name=CLUSTER_NAME,
+        nodename=nodename,
+        ctld_port=ctld_port,
+        slurmd_port=slurmd_port,
+        munge_socket=munge_socket,
+        state_dir=state_dir,
+        spool_dir=spool_dir,
+        workdir=workdir,
+        topology=topology,
+        real_memory=real_memory,
         partition=PARTITION,
     )
     conf.write_text(conf_text)
@@ -450,24 +462,45 @@ def start_cluster(workdir: Path, timeout: float = 90) -> SlurmCluster:
     run_conf.write_text(conf_text)
 
     cluster = SlurmCluster(
-        workdir=workdir, rundir=rundir, conf=run_conf, env=_client_env(run_conf),
-        nodename=nodename, cpus=cpus, real_memory_mb=real_memory,
-        logs={"munged": munge_dir / "munged.log", "slurmctld": workdir / "slurmctld.log",
-              "slurmd": workdir / "slurmd.log"},
+        workdir=workdir,
+        rundir=rundir,
+        conf=run_conf,
+        env=_client_env(run_conf),
+        nodename=nodename,
+        cpus=cpus,
+        real_memory_mb=real_memory,
+        logs={
+            "munged": munge_dir / "munged.log",
+            "slurmctld": workdir / "slurmctld.log",
+            "slurmd": workdir / "slurmd.log",
+        },
     )
     _ACTIVE[id(cluster)] = cluster
     try:
         key = munge_dir / "munge.key"
         _munge_key(key)
-        _spawn(cluster, "munged", [
-            "munged", "--foreground", "--force", f"--socket={munge_socket}",
-            f"--key-file={key}", f"--pid-file={munge_dir / 'munged.pid'}",
-            f"--log-file={munge_dir / 'munged.log'}", f"--seed-file={munge_dir / 'munged.seed'}",
-        ])
+        _spawn(
+            cluster,
+            "munged",
+            [
+                "munged",
+                "--foreground",
+                "--force",
+                f"--socket={munge_socket}",
+                f"--key-file={key}",
+                f"--pid-file={munge_dir / 'munged.pid'}",
+                f"--log-file={munge_dir / 'munged.log'}",
+                f"--seed-file={munge_dir / 'munged.seed'}",
+            ],
+        )
         _wait(cluster, lambda: munge_socket.exists(), 15, "munged socket")
         _spawn(cluster, "slurmctld", ["slurmctld", "-D", "-i", "-f", str(run_conf)])
-        _wait(cluster, lambda: "UP" in cluster.run("scontrol", "ping", check=False, timeout=10).stdout,
-              timeout, "slurmctld answering 'scontrol ping'")
+        _wait(
+            cluster,
+            lambda: "UP" in cluster.run("scontrol", "ping", check=False, timeout=10).stdout,
+            timeout,
+            "slurmctld answering 'scontrol ping'",
+        )
         _spawn(cluster, "slurmd", ["slurmd", "-D", "-f", str(run_conf), "-N", nodename])
         _wait_node_idle(cluster, timeout)
         _link_client_conf(cluster)
@@ -485,8 +518,14 @@ def _spawn(cluster: SlurmCluster, name: str, argv: list[str]) -> None:
     out = open(cluster.workdir / f"{name}.stdout", "ab")
     argv = [_which(argv[0]) or argv[0], *argv[1:]]
     proc = subprocess.Popen(
-        argv, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
-        env=cluster.env, preexec_fn=_pdeathsig, start_new_session=True, close_fds=True,
+        argv,
+        stdin=subprocess.DEVNULL,
+        stdout=out,
+        stderr=subprocess.STDOUT,
+        env=cluster.env,
+        preexec_fn=_pdeathsig,
+        start_new_session=True,
+        close_fds=True,
     )
     out.close()
     cluster.procs[name] = proc
@@ -530,12 +569,12 @@ def _wait_node_idle(cluster: SlurmCluster, timeout: float) -> None:
             return
         # DOWN/DRAIN (e.g. stale state or a reboot flag): resume it, at most every 5 s.
         if any(s in state for s in ("down", "drain", "fail", "inval")) and time.monotonic() - last_resume > 5:
-            cluster.run("scontrol", "update", f"nodename={cluster.nodename}", "state=resume",
-                        check=False, timeout=10)
+            cluster.run("scontrol", "update", f"nodename={cluster.nodename}", "state=resume", check=False, timeout=10)
             last_resume = time.monotonic()
         time.sleep(0.5)
-    raise SlurmClusterError(f"timeout ({timeout:.0f}s) waiting for node {cluster.nodename} "
-                            f"to become idle (last sinfo state: {state!r})")
+    raise SlurmClusterError(
+        f"timeout ({timeout:.0f}s) waiting for node {cluster.nodename} to become idle (last sinfo state: {state!r})"
+    )
 
 
 def stop_cluster(cluster: SlurmCluster, timeout: float = 15) -> None:
@@ -544,8 +583,10 @@ def stop_cluster(cluster: SlurmCluster, timeout: float = 15) -> None:
         with contextlib.suppress(Exception):
             cluster.run("scancel", "--full", "--partition", cluster.partition, check=False, timeout=10)
             deadline = time.monotonic() + 10  # let slurmd end the job steps
-            while time.monotonic() < deadline and cluster.run(
-                    "squeue", "-h", "-t", "PD,R,CG", "-o", "%i", check=False, timeout=10).stdout.strip():
+            while (
+                time.monotonic() < deadline
+                and cluster.run("squeue", "-h", "-t", "PD,R,CG", "-o", "%i", check=False, timeout=10).stdout.strip()
+            ):
                 time.sleep(0.5)
     for name in ("slurmd", "slurmctld", "munged"):
         proc = cluster.procs.get(name)

@@ -8,11 +8,12 @@ Public API (all lengths in mm)::
     rho_w = model.wall(tau, theta)                                      # Eq. 5
     model.save("model.json"); VesselModel.load("model.json")
 """
+
 from vcs.ends import Ends, find_ends
 from vcs.errors import VCSInputError
+from vcs.grid import MeasurementGrid, measurement_grid
 from vcs.io import Surface, read_surface
 from vcs.model import VesselCoordinateSystem
-from vcs.grid import MeasurementGrid, measurement_grid
 from vcs.phantoms.factory import make_phantom
 from vcs.phantoms.sweep import Phantom
 from vcs.surface import WallMesh, wall_mesh

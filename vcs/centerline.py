@@ -13,6 +13,7 @@
 All lengths are in mm. The frame {t, v1, v2} along the curve is in :mod:`vcs.frame`;
 :meth:`vcs.model.VesselCoordinateSystem.from_surface` composes the steps.
 """
+
 from __future__ import annotations
 
 import logging
@@ -74,8 +75,9 @@ class VoxelLumen:
         return ndimage.map_coordinates(self.distance, ijk, order=1, mode="constant", cval=0.0)
 
 
-def voxelize(vertices: NDArray[np.floating], faces: NDArray[np.integer], h: float, pad: int = 2, *,
-             distance: bool = True) -> VoxelLumen:
+def voxelize(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], h: float, pad: int = 2, *, distance: bool = True
+) -> VoxelLumen:
     """Inside/outside voxel mask of a closed triangulated surface by scan-line parity along x.
 
     Each triangle is intersected with the x-parallel rays through the voxel centres of its (y, z)
@@ -200,7 +202,9 @@ def lumen_voxels(vertices: NDArray[np.floating], faces: NDArray[np.integer], end
     """
     lumen = voxelize(ends.closed_vertices, ends.closed_faces, h, distance=False)
     if not lumen.inside.any():
-        raise VCSInputError("the surface encloses no voxel of the lumen; check the units (--units) and that it is a tube")
+        raise VCSInputError(
+            "the surface encloses no voxel of the lumen; check the units (--units) and that it is a tube"
+        )
     return wall_distance(lumen, vertices, faces[ends.wall_mask])
 
 
@@ -226,8 +230,13 @@ def wall_distance(lumen: VoxelLumen, vertices: NDArray[np.floating], wall_faces:
         Same grid; ``distance`` (nx, ny, nz) float, mm, 0 outside the lumen.
     """
     tri = vertices[wall_faces]
-    samples = [vertices[np.unique(wall_faces)], tri.mean(axis=1), 0.5 * (tri[:, 0] + tri[:, 1]),
-               0.5 * (tri[:, 1] + tri[:, 2]), 0.5 * (tri[:, 2] + tri[:, 0])]
+    samples = [
+        vertices[np.unique(wall_faces)],
+        tri.mean(axis=1),
+        0.5 * (tri[:, 0] + tri[:, 1]),
+        0.5 * (tri[:, 1] + tri[:, 2]),
+        0.5 * (tri[:, 2] + tri[:, 0]),
+    ]
     edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
     # triangles larger than half a voxel get a barycentric grid of n x n points, n per triangle
     n_sub = np.minimum(np.ceil(edge / (0.5 * lumen.h)), 24).astype(int)
@@ -237,8 +246,13 @@ def wall_distance(lumen: VoxelLumen, vertices: NDArray[np.floating], wall_faces:
         w1, w2 = i[keep] / n, j[keep] / n
         w0 = 1 - w1 - w2
         tb = tri[n_sub == n]
-        samples.append((w0[None, :, None] * tb[:, None, 0] + w1[None, :, None] * tb[:, None, 1]
-                        + w2[None, :, None] * tb[:, None, 2]).reshape(-1, 3))
+        samples.append(
+            (
+                w0[None, :, None] * tb[:, None, 0]
+                + w1[None, :, None] * tb[:, None, 1]
+                + w2[None, :, None] * tb[:, None, 2]
+            ).reshape(-1, 3)
+        )
     ijk_w = lumen.index_of(np.concatenate(samples))
     ok = np.all((ijk_w >= 0) & (ijk_w < np.array(lumen.inside.shape)), axis=1)
     wall = np.zeros(lumen.inside.shape, bool)
@@ -247,11 +261,13 @@ def wall_distance(lumen: VoxelLumen, vertices: NDArray[np.floating], wall_faces:
     dist = np.where(lumen.inside, np.maximum(dist, 0.5 * lumen.h), 0.0)
     return VoxelLumen(lumen.inside, dist, lumen.origin, lumen.h)
 
+
 # ------------------------------------------------------------------ 2. lowest-cost path p_A -> p_B
 
 
-def lumen_path(vertices: NDArray[np.floating], faces: NDArray[np.integer], ends: Ends,
-               lumen: VoxelLumen) -> tuple[NDArray[np.floating], End, End]:
+def lumen_path(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], ends: Ends, lumen: VoxelLumen
+) -> tuple[NDArray[np.floating], End, End]:
     """Lowest-cost path through the lumen voxels from the inlet to the outlet.
 
     Paper Section 2.2.1: the path from p_A to p_B that minimises the sum of 1/d along it
@@ -321,9 +337,7 @@ def start_voxel(lumen: VoxelLumen, end: End, name: str) -> NDArray[np.int64]:
     return inside[i]
 
 
-_OFFSETS = np.array(
-    [(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)]
-)
+_OFFSETS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)])
 
 
 def lowest_cost_path(lumen: VoxelLumen, start: ArrayLike, goal: ArrayLike) -> NDArray[np.int64]:
@@ -418,8 +432,9 @@ def lowest_cost_path(lumen: VoxelLumen, start: ArrayLike, goal: ArrayLike) -> ND
     return np.column_stack(np.unravel_index(np.array(path[::-1], dtype=np.int64), shape))
 
 
-def end_plane_from_path(vertices: NDArray[np.floating], faces: NDArray[np.integer], lumen: VoxelLumen, end: End,
-                        path: NDArray[np.floating]) -> tuple[End, NDArray[np.floating]]:
+def end_plane_from_path(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], lumen: VoxelLumen, end: End, path: NDArray[np.floating]
+) -> tuple[End, NDArray[np.floating]]:
     """End plane of an end given as a point, from the lumen path that starts there.
 
     The normal is the path's direction between one and three local radii from its start (past
@@ -461,8 +476,13 @@ def end_plane_from_path(vertices: NDArray[np.floating], faces: NDArray[np.intege
     return End(center, normal, radius, "point, centred on the wall cross-section"), path
 
 
-def plane_section(vertices: NDArray[np.floating], faces: NDArray[np.integer], p: NDArray[np.floating],
-                  n: NDArray[np.floating], r_max: float) -> tuple[NDArray[np.floating] | None, float | None]:
+def plane_section(
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    p: NDArray[np.floating],
+    n: NDArray[np.floating],
+    r_max: float,
+) -> tuple[NDArray[np.floating] | None, float | None]:
     """Centroid and equivalent radius of the wall's cut by the plane (p, n), within r_max of p.
 
     Parameters
@@ -497,6 +517,7 @@ def plane_section(vertices: NDArray[np.floating], faces: NDArray[np.integer], p:
     c = x.mean(axis=0)
     return c, float(np.median(np.linalg.norm(x - c, axis=1)))
 
+
 # ------------------------------------------------------------------ 3-4. spline fit, arc length
 
 
@@ -518,9 +539,16 @@ def uniform_knots(n_interior: int, k: int = 3) -> NDArray[np.floating]:
     return np.concatenate([np.zeros(k + 1), inner, np.ones(k + 1)])
 
 
-def _lsq_fixed_ends(u: NDArray[np.floating], pts: NDArray[np.floating], t: NDArray[np.floating],
-                    p0: NDArray[np.floating], p1: NDArray[np.floating], smooth: float = 1e-6,
-                    d0: ArrayLike | None = None, d1: ArrayLike | None = None) -> BSpline:
+def _lsq_fixed_ends(
+    u: NDArray[np.floating],
+    pts: NDArray[np.floating],
+    t: NDArray[np.floating],
+    p0: NDArray[np.floating],
+    p1: NDArray[np.floating],
+    smooth: float = 1e-6,
+    d0: ArrayLike | None = None,
+    d1: ArrayLike | None = None,
+) -> BSpline:
     """Least-squares cubic B-spline through data (u, pts) with c(0) = p0 and c(1) = p1, and, when
     the unit directions ``d0``/``d1`` are given, c'(0) parallel to d0 and c'(1) parallel to d1.
 
@@ -581,8 +609,9 @@ def end_tangents(inlet: End, outlet: End) -> tuple[NDArray[np.floating], NDArray
     return None
 
 
-def fit_spline(points: ArrayLike, n_knots: int = 9, *,
-               end_directions: tuple[ArrayLike, ArrayLike] | None = None) -> BSpline:
+def fit_spline(
+    points: ArrayLike, n_knots: int = 9, *, end_directions: tuple[ArrayLike, ArrayLike] | None = None
+) -> BSpline:
     """Least-squares cubic B-spline through ordered points, end points held (paper Section 2.2.1, Eq. 1).
 
     c(u) = sum_i c_i B_i(u) with ``n_knots`` = L uniform interior knots on [0, 1]; u is the
@@ -621,8 +650,13 @@ def fit_spline(points: ArrayLike, n_knots: int = 9, *,
     return _lsq_fixed_ends(u, pts, uniform_knots(n_knots), pts[0], pts[-1], d0=d0, d1=d1)
 
 
-def reparametrise_by_arc_length(curve: BSpline, *, end_directions: tuple[ArrayLike, ArrayLike] | None = None,
-                                n_resample: int = 2000, passes: int = 2) -> BSpline:
+def reparametrise_by_arc_length(
+    curve: BSpline,
+    *,
+    end_directions: tuple[ArrayLike, ArrayLike] | None = None,
+    n_resample: int = 2000,
+    passes: int = 2,
+) -> BSpline:
     """The same curve with tau in [0, 1] proportional to arc length (paper Section 2.2.1).
 
     The curve is refitted (same knots, same end points, same end directions) to ``n_resample`` + 1
@@ -657,8 +691,13 @@ def reparametrise_by_arc_length(curve: BSpline, *, end_directions: tuple[ArrayLi
     return curve
 
 
-def fit_centerline(points: ArrayLike, n_knots: int = 9, *, n_resample: int = 2000,
-                   end_directions: tuple[ArrayLike, ArrayLike] | None = None) -> BSpline:
+def fit_centerline(
+    points: ArrayLike,
+    n_knots: int = 9,
+    *,
+    n_resample: int = 2000,
+    end_directions: tuple[ArrayLike, ArrayLike] | None = None,
+) -> BSpline:
     """Cubic B-spline centerline with ``n_knots`` uniform interior knots, arc-length parametrised.
 
     Paper Section 2.2.1 (centerline c(tau), Eq. 1): :func:`fit_spline` then
@@ -710,12 +749,18 @@ def curve_length(curve: BSpline) -> float:
     """Length (mm) of ``curve`` over [0, 1] (Simpson's rule on 2048 intervals)."""
     return float(arc_length_table(curve, np.linspace(0, 1, 2049))[-1])
 
+
 # ------------------------------------------------------------------ 5. re-centring (beyond the paper)
 
 
-def recentre(curve: BSpline, vertices: NDArray[np.floating], wall_faces: NDArray[np.integer], *,
-             iterations: int = 3,
-             end_directions: tuple[ArrayLike, ArrayLike] | None = None) -> tuple[BSpline, list[float]]:
+def recentre(
+    curve: BSpline,
+    vertices: NDArray[np.floating],
+    wall_faces: NDArray[np.integer],
+    *,
+    iterations: int = 3,
+    end_directions: tuple[ArrayLike, ArrayLike] | None = None,
+) -> tuple[BSpline, list[float]]:
     """Move the centerline to the centres of the wall's cross-sections (the project's extension).
 
     Not in the paper: the voxel path cuts bends and carries the voxel staircase (errors of a few
@@ -745,7 +790,9 @@ def recentre(curve: BSpline, vertices: NDArray[np.floating], wall_faces: NDArray
     """
     tri = vertices[wall_faces]
     area = 0.5 * np.linalg.norm(triangle_cross(tri), axis=1)
-    w_vert = cast(NDArray[np.floating], np.bincount(wall_faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices)))
+    w_vert = cast(
+        NDArray[np.floating], np.bincount(wall_faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices))
+    )
     used = w_vert > 0
     p0, p1 = curve.c[0], curve.c[-1]
     n_knots = len(curve.t) - 2 * (curve.k + 1)
@@ -756,10 +803,16 @@ def recentre(curve: BSpline, vertices: NDArray[np.floating], wall_faces: NDArray
     return curve, shifts
 
 
-def recentre_step(curve: BSpline, pts: NDArray[np.floating], w: NDArray[np.floating], p0: NDArray[np.floating],
-                  p1: NDArray[np.floating], n_knots: int,
-                  dirs: tuple[ArrayLike, ArrayLike] | None = None,
-                  n_bins: int | None = None) -> tuple[BSpline, float]:
+def recentre_step(
+    curve: BSpline,
+    pts: NDArray[np.floating],
+    w: NDArray[np.floating],
+    p0: NDArray[np.floating],
+    p1: NDArray[np.floating],
+    n_knots: int,
+    dirs: tuple[ArrayLike, ArrayLike] | None = None,
+    n_bins: int | None = None,
+) -> tuple[BSpline, float]:
     """One re-centring step of :func:`recentre`.
 
     Parameters

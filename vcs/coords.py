@@ -3,6 +3,7 @@
 Pure functions of a centerline (scipy BSpline, arc-length parametrised on [0, 1]) and its
 parallel-transport frame; vectorised over N points.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -81,7 +82,7 @@ class CurveIndex:
         return out
 
     @classmethod
-    def from_curve(cls, curve: BSpline, length: float) -> "CurveIndex":
+    def from_curve(cls, curve: BSpline, length: float) -> CurveIndex:
         """Index of ``curve`` sampled every <= 0.2 mm of arc (513 to 16385 samples).
 
         Parameters
@@ -149,7 +150,8 @@ def _uniform_interp(tau: NDArray[np.floating], table: NDArray[np.floating]) -> N
 def closest_tau(curve: BSpline, index: CurveIndex, points: ArrayLike, newton_steps: int = 2) -> NDArray[np.floating]:
     """tau = argmin_t |x - c(t)| (paper Eq. 2).
 
-    Global search on dense samples of the curve (spacing <= 0.2 mm; :meth:`CurveIndex.nearest_sample`), then Newton steps
+    Global search on dense samples of the curve (spacing <= 0.2 mm;
+    :meth:`CurveIndex.nearest_sample`), then Newton steps
     on g(t) = (c(t) - x) . c'(t) (quadratic convergence from within half a sample), clipped to
     [0, 1].
 
@@ -184,8 +186,12 @@ def closest_tau(curve: BSpline, index: CurveIndex, points: ArrayLike, newton_ste
     return t
 
 
-def to_vcs(curve: BSpline, frame: ParallelTransportFrame, index: CurveIndex, points: ArrayLike,
-           ) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating], NDArray[np.bool_]]:
+def to_vcs(
+    curve: BSpline,
+    frame: ParallelTransportFrame,
+    index: CurveIndex,
+    points: ArrayLike,
+) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating], NDArray[np.bool_]]:
     """Vessel coordinates of points (paper Eqs. 2-4).
 
     tau = argmin_t |x - c(t)|, rho = |x - c(tau)|, theta = atan2((x - c).v2, (x - c).v1) in
@@ -227,8 +233,9 @@ def to_vcs(curve: BSpline, frame: ParallelTransportFrame, index: CurveIndex, poi
     return tau, theta, rho, in_omega
 
 
-def to_cartesian(curve: BSpline, frame: ParallelTransportFrame, tau: ArrayLike, theta: ArrayLike,
-                 rho: ArrayLike) -> NDArray[np.floating]:
+def to_cartesian(
+    curve: BSpline, frame: ParallelTransportFrame, tau: ArrayLike, theta: ArrayLike, rho: ArrayLike
+) -> NDArray[np.floating]:
     """x = c(tau) + rho (v1(tau) cos theta + v2(tau) sin theta) (paper Eq. 1 / Eq. 4).
 
     Parameters

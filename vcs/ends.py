@@ -3,6 +3,7 @@
 Paper Section 2.2.1: the section lies between two end planes whose centres p_A (tau = 0, inlet)
 and p_B (tau = 1, outlet) are the end points of the centerline search.
 """
+
 from __future__ import annotations
 
 import logging
@@ -80,8 +81,9 @@ class Ends:
     warnings: list[str] = field(default_factory=list)
 
 
-def _inward(center: NDArray[np.floating], normal: NDArray[np.floating], radius: float,
-            vertices: NDArray[np.floating]) -> NDArray[np.floating]:
+def _inward(
+    center: NDArray[np.floating], normal: NDArray[np.floating], radius: float, vertices: NDArray[np.floating]
+) -> NDArray[np.floating]:
     """Orient a plane normal at an end towards the wall vertices near that end (into the lumen)."""
     d = vertices - center
     near = np.linalg.norm(d, axis=1) < 2.0 * radius
@@ -100,8 +102,9 @@ def _wall_on_both_sides(vertices: NDArray[np.floating], e: End) -> bool:
     return bool(min(np.mean(side > tol), np.mean(side < -tol)) > 0.1)
 
 
-def _fan_caps(vertices: NDArray[np.floating],
-              loops: list[NDArray[np.integer]]) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
+def _fan_caps(
+    vertices: NDArray[np.floating], loops: list[NDArray[np.integer]]
+) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
     """Close every boundary loop with a triangle fan around its centroid."""
     new_v, new_f = [vertices], []
     n = len(vertices)
@@ -196,8 +199,10 @@ def find_ends(
     edges, counts = edge_topology(faces)
     n_nonmanifold = int((counts > 2).sum())
     if n_nonmanifold:
-        warnings.append(f"{n_nonmanifold} non-manifold edges (used by more than two triangles); "
-                        "results near them may be unreliable: repair the mesh")
+        warnings.append(
+            f"{n_nonmanifold} non-manifold edges (used by more than two triangles); "
+            "results near them may be unreliable: repair the mesh"
+        )
 
     # (b) labelled caps in a cell array
     cap_ends: list[End] = []
@@ -233,8 +238,9 @@ def find_ends(
         r_big = max(radii)
         holes = [r < 0.2 * r_big or _wall_on_both_sides(vertices, e) for r, e in zip(radii, loop_ends, strict=True)]
         if any(holes):
-            warnings.append(f"{sum(holes)} small opening(s) (holes) in the wall closed for the lumen; "
-                            "their rims are wall points")
+            warnings.append(
+                f"{sum(holes)} small opening(s) (holes) in the wall closed for the lumen; their rims are wall points"
+            )
             loop_ends = [e for e, h in zip(loop_ends, holes) if not h]
     closed_v, cap_f = _fan_caps(vertices, loops)
     closed_f = np.concatenate([faces, cap_f])
@@ -252,8 +258,9 @@ def find_ends(
             raise VCSInputError("give both --inlet-cap and --outlet-cap (or neither)")
         cap_in = _end_from_faces(*inlet_cap, "inlet cap file")
         cap_out = _end_from_faces(*outlet_cap, "outlet cap file")
-        return Ends(orient(cap_in), orient(cap_out), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes,
-                    warnings)
+        return Ends(
+            orient(cap_in), orient(cap_out), "cap_files", wall_mask, closed_v, closed_f, len(loops), notes, warnings
+        )
 
     for cands, method in ((cap_ends, "labelled_caps"), (loop_ends, "open_loops")):
         if len(cands) < 2:
@@ -280,7 +287,17 @@ def find_ends(
             i_in = _pick(cands, None)
             i_out = 1 - i_in
         notes.append(f"{len(cands)} candidate ends; inlet = {cands[i_in].source}, outlet = {cands[i_out].source}")
-        return Ends(orient(cands[i_in]), orient(cands[i_out]), method, wall_mask, closed_v, closed_f, len(loops), notes, warnings)
+        return Ends(
+            orient(cands[i_in]),
+            orient(cands[i_out]),
+            method,
+            wall_mask,
+            closed_v,
+            closed_f,
+            len(loops),
+            notes,
+            warnings,
+        )
 
     if inlet is None or outlet is None:
         if len(loops) == 0:
@@ -294,6 +311,13 @@ def find_ends(
         )
     notes.append("ends given as explicit points")
     return Ends(
-        End(inlet, None, None, "point"), End(outlet, None, None, "point"), "points",
-        wall_mask, closed_v, closed_f, len(loops), notes, warnings,
+        End(inlet, None, None, "point"),
+        End(outlet, None, None, "point"),
+        "points",
+        wall_mask,
+        closed_v,
+        closed_f,
+        len(loops),
+        notes,
+        warnings,
     )

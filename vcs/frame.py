@@ -5,6 +5,7 @@
 2. :class:`ParallelTransportFrame`: {v1, v2} is transported along c(tau) without rotation about t
    (:func:`rotation_minimizing_frame`).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -87,8 +88,9 @@ def initial_v1(t0: ArrayLike, c0: ArrayLike, wall_centroid: ArrayLike) -> tuple[
     return p / np.linalg.norm(p), "fallback: least-aligned coordinate axis (centroid on the tangent)"
 
 
-def rotation_minimizing_frame(points: NDArray[np.floating], tangents: NDArray[np.floating],
-                              v1_0: ArrayLike) -> NDArray[np.floating]:
+def rotation_minimizing_frame(
+    points: NDArray[np.floating], tangents: NDArray[np.floating], v1_0: ArrayLike
+) -> NDArray[np.floating]:
     """Parallel transport of v1 along sampled points (paper Section 2.2.2).
 
     Double-reflection method (Wang et al., ACM TOG 2008): a discrete rotation-minimising frame,

@@ -12,6 +12,7 @@ theta = 2 pi is not repeated. :func:`grid_axes` is the single definition; :func:
 it through a model, :func:`measurement_grid` adds hexahedral cells for ``vcs grid``, and
 :func:`vcs.cfd.resample.sample_case` samples CFD fields on exactly these nodes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,8 +35,9 @@ GRID_DEFAULTS = {"n_tau": 64, "n_theta": 32, "n_rho": 11}
 # ---------------------------------------------------------------------------------------------
 # The measurement grid (pure numpy)
 # ---------------------------------------------------------------------------------------------
-def grid_axes(n_tau: int, n_theta: int, n_rho: int) -> tuple[NDArray[np.floating], NDArray[np.floating],
-                                                             NDArray[np.floating]]:
+def grid_axes(
+    n_tau: int, n_theta: int, n_rho: int
+) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]:
     """The grid's node coordinates along each axis (the single grid definition of the package).
 
     Parameters
@@ -62,8 +64,9 @@ def grid_axes(n_tau: int, n_theta: int, n_rho: int) -> tuple[NDArray[np.floating
     return np.linspace(0.0, 1.0, n_tau), TWO_PI * np.arange(n_theta) / n_theta, np.linspace(0.0, 1.0, n_rho)
 
 
-def grid_points(model: VesselModel, tau: ArrayLike, theta: ArrayLike,
-                rho_n: ArrayLike) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+def grid_points(
+    model: VesselModel, tau: ArrayLike, theta: ArrayLike, rho_n: ArrayLike
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
     """Map the grid axes through a model: x = c(tau) + rho_n rho_w (v1 cos theta + v2 sin theta) (Eq. 8 scaled).
 
     Parameters
@@ -162,8 +165,12 @@ def from_vcs_components(components: NDArray[np.floating], frame: NDArray[np.floa
     return np.einsum("ijab,ija->ijb", frame, components)
 
 
-def grid_to_vtk(points: NDArray[np.floating], point_arrays: dict[str, NDArray[np.floating]] | None = None, *,
-                close_theta: bool = True) -> pv.UnstructuredGrid | pv.PolyData:
+def grid_to_vtk(
+    points: NDArray[np.floating],
+    point_arrays: dict[str, NDArray[np.floating]] | None = None,
+    *,
+    close_theta: bool = True,
+) -> pv.UnstructuredGrid | pv.PolyData:
     """A (n_tau, n_theta, n_rho) or (n_tau, n_theta) grid as a pyvista UnstructuredGrid/PolyData.
 
     With ``close_theta`` the theta = 0 layer is repeated at 2 pi so the surface has no seam.
@@ -270,9 +277,14 @@ def _cylindrical_cells(n_tau: int, n_theta: int, n_rho: int) -> NDArray[np.integ
     return np.concatenate([quad[:-1], quad[1:]], axis=-1).reshape(-1, 8)
 
 
-def measurement_grid(model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
-                     n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"],
-                     scheme: str = "cylindrical") -> MeasurementGrid:
+def measurement_grid(
+    model: VesselModel,
+    *,
+    n_tau: int = GRID_DEFAULTS["n_tau"],
+    n_theta: int = GRID_DEFAULTS["n_theta"],
+    n_rho: int = GRID_DEFAULTS["n_rho"],
+    scheme: str = "cylindrical",
+) -> MeasurementGrid:
     """The measurement grid of a vessel model with hexahedral cells (paper Section 2.4.2).
 
     Parameters
@@ -304,8 +316,9 @@ def measurement_grid(model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
     if scheme == "cylindrical":
         pts, _ = grid_points(model, tau, theta, rho_n)
         T, TH, RN = np.meshgrid(tau, theta, rho_n, indexing="ij")
-        return MeasurementGrid(pts.reshape(-1, 3), _cylindrical_cells(n_tau, n_theta, n_rho),
-                               T.ravel(), TH.ravel(), RN.ravel())
+        return MeasurementGrid(
+            pts.reshape(-1, 3), _cylindrical_cells(n_tau, n_theta, n_rho), T.ravel(), TH.ravel(), RN.ravel()
+        )
     if model.wall is None:
         raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
     P, Q, theta_p = _ogrid_pattern(n_theta, n_rho)

@@ -3,6 +3,7 @@
 Everything inside `vcs` is in millimetres. `read_surface` converts the input units once, and
 records the factor so outputs can be given back in the units of the input mesh.
 """
+
 from __future__ import annotations
 
 import logging
@@ -160,9 +161,7 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
     vertices = np.asarray(mesh.points, dtype=float)
     if not np.all(np.isfinite(vertices)):
         n_bad = int((~np.isfinite(vertices).all(axis=1)).sum())
-        raise VCSInputError(
-            f"'{path}' has {n_bad} vertices with NaN or infinite coordinates; repair the mesh"
-        )
+        raise VCSInputError(f"'{path}' has {n_bad} vertices with NaN or infinite coordinates; repair the mesh")
     cell_data = {
         name: np.asarray(mesh.cell_data[name])
         for name in mesh.cell_data.keys()
@@ -171,8 +170,12 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
     warnings: list[str] = []
     tri = vertices[faces]
     area2 = np.linalg.norm(triangle_cross(tri), axis=1)
-    degenerate = (area2 <= 1e-12 * max(float(np.ptp(vertices)), 1e-300) ** 2) | (faces[:, 0] == faces[:, 1]) \
-        | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    degenerate = (
+        (area2 <= 1e-12 * max(float(np.ptp(vertices)), 1e-300) ** 2)
+        | (faces[:, 0] == faces[:, 1])
+        | (faces[:, 1] == faces[:, 2])
+        | (faces[:, 0] == faces[:, 2])
+    )
     if degenerate.any():
         warnings.append(f"{int(degenerate.sum())} degenerate (zero-area) triangles removed")
         faces = faces[~degenerate]
@@ -222,8 +225,9 @@ def read_points_table(path: Path | str) -> NDArray[np.floating]:
     return read_table_columns(path, ("x", "y", "z"), header_required=False, what="points file")
 
 
-def read_table_columns(path: Path | str, names: tuple[str, ...], *, header_required: bool = True,
-                       what: str = "file") -> NDArray[np.floating]:
+def read_table_columns(
+    path: Path | str, names: tuple[str, ...], *, header_required: bool = True, what: str = "file"
+) -> NDArray[np.floating]:
     """Read named columns of a CSV (or an (N, len(names)) ``.npy``) as an (N, len(names)) array.
 
     Without ``header_required``, a CSV whose first line does not name the columns is read as
@@ -261,7 +265,9 @@ def read_table_columns(path: Path | str, names: tuple[str, ...], *, header_requi
                 header = [h.strip().lower() for h in fh.readline().strip().split(",")]
             missing = [n for n in names if n not in header]
             if missing and header_required:
-                raise VCSInputError(f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}")
+                raise VCSInputError(
+                    f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}"
+                )
             arr = np.loadtxt(path, delimiter=",", skiprows=0 if missing else 1, ndmin=2)
             if arr.size == 0:
                 raise VCSInputError(f"'{path}' has no data rows; give at least one row")
@@ -270,8 +276,9 @@ def read_table_columns(path: Path | str, names: tuple[str, ...], *, header_requi
     except VCSInputError:
         raise
     except Exception as exc:
-        raise VCSInputError(f"cannot read '{path}' ({type(exc).__name__}: {exc}); give numeric "
-                            f"{','.join(names)} columns") from None
+        raise VCSInputError(
+            f"cannot read '{path}' ({type(exc).__name__}: {exc}); give numeric {','.join(names)} columns"
+        ) from None
     if arr.ndim != 2 or arr.shape[1] != len(names):
         raise VCSInputError(f"'{path}' holds an array of shape {arr.shape}; expected {len(names)} columns")
     return arr

@@ -6,6 +6,7 @@ Plain vectorised functions on arrays (``vertices``: (N, 3) float, ``faces``: (M,
 ``tris``: (M, 3, 3) float triangle corners), in whatever length unit the caller uses.
 pyvista is imported only inside the VTP writers.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -331,8 +332,9 @@ def consistent_winding(vertices: NDArray[np.floating], faces: NDArray[np.integer
         return faces, False
     # graph weight 1 = consistent, 2 = flip relative to the neighbour
     w = np.where(same_dir, 2, 1)
-    G = sparse.coo_matrix((np.concatenate([w, w]), (np.concatenate(pair_f.T), np.concatenate(pair_f[:, ::-1].T))),
-                          shape=(m, m)).tocsr()
+    G = sparse.coo_matrix(
+        (np.concatenate([w, w]), (np.concatenate(pair_f.T), np.concatenate(pair_f[:, ::-1].T))), shape=(m, m)
+    ).tocsr()
     n_comp, labels = connected_components(G, directed=False)
     pair_f = pair_f.astype(np.int64)
     pair_key = np.concatenate([pair_f[:, 0] * m + pair_f[:, 1], pair_f[:, 1] * m + pair_f[:, 0]])
@@ -374,8 +376,9 @@ def orient_outward(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -
     return faces
 
 
-def points_inside(points: ArrayLike, tris: NDArray[np.floating],
-                  direction: tuple[float, float, float] = (0.5773, 0.5774, 0.5775)) -> NDArray[np.bool_]:
+def points_inside(
+    points: ArrayLike, tris: NDArray[np.floating], direction: tuple[float, float, float] = (0.5773, 0.5774, 0.5775)
+) -> NDArray[np.bool_]:
     """Ray-parity point-in-closed-surface test (Moeller-Trumbore, vectorised over triangles).
 
     Parameters
@@ -413,8 +416,10 @@ def points_inside(points: ArrayLike, tris: NDArray[np.floating],
 # --------------------------------------------------------------------------- STL
 
 _STL_RECORD = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-_FACET = ("facet normal {:.9e} {:.9e} {:.9e}\n outer loop\n  vertex {:.9e} {:.9e} {:.9e}\n"
-          "  vertex {:.9e} {:.9e} {:.9e}\n  vertex {:.9e} {:.9e} {:.9e}\n endloop\nendfacet\n")
+_FACET = (
+    "facet normal {:.9e} {:.9e} {:.9e}\n outer loop\n  vertex {:.9e} {:.9e} {:.9e}\n"
+    "  vertex {:.9e} {:.9e} {:.9e}\n  vertex {:.9e} {:.9e} {:.9e}\n endloop\nendfacet\n"
+)
 
 
 def write_stl_ascii(path: str | Path, solids: dict[str, NDArray[np.floating]]) -> None:
@@ -439,8 +444,9 @@ def write_stl_ascii(path: str | Path, solids: dict[str, NDArray[np.floating]]) -
             fh.write(f"endsolid {name}\n")
 
 
-def write_stl_binary(path: str | Path, vertices: NDArray[np.floating], faces: NDArray[np.integer],
-                     header: str = "") -> None:
+def write_stl_binary(
+    path: str | Path, vertices: NDArray[np.floating], faces: NDArray[np.integer], header: str = ""
+) -> None:
     """Write a triangle mesh as binary STL (single solid, float32, facet normals by the winding).
 
     Parameters
@@ -485,7 +491,7 @@ def read_stl_solids(path: str | Path) -> dict[str, NDArray[np.floating]]:
     solids: dict[str, list[list[list[float]]]] = {}
     name = None
     tri: list[list[float]] = []
-    with open(path, "r", encoding="ascii", errors="replace") as fh:
+    with open(path, encoding="ascii", errors="replace") as fh:
         for line in fh:
             tok = line.split()
             if not tok:

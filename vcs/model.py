@@ -1,4 +1,5 @@
 """The Vessel Coordinate System of one vessel section: build from a surface, use, save, reload."""
+
 from __future__ import annotations
 
 import logging
@@ -75,7 +76,7 @@ class VesselCoordinateSystem:
         voxels_per_radius: float = 6.0,
         max_voxels: float = 4e6,
         recentre_iterations: int = 3,
-    ) -> "VesselCoordinateSystem":
+    ) -> VesselCoordinateSystem:
         """Build the VCS of the section between ``ends`` (paper Sections 2.2.1-2.2.2).
 
         The steps, each a function of :mod:`vcs.centerline` or :mod:`vcs.frame`: lumen voxels and
@@ -129,17 +130,25 @@ class VesselCoordinateSystem:
         self = cls(curve, v1_0, v1_0_from=how)
         t_frame = time.perf_counter()
         # "astar": the lumen path search (key kept from the former A* implementation)
-        timings = {"voxelize": t_vox - t0, "astar": t_path - t_vox, "spline_fit": t_fit - t_path,
-                   "recentre": t_recentre - t_fit, "frame": t_frame - t_recentre}
+        timings = {
+            "voxelize": t_vox - t0,
+            "astar": t_path - t_vox,
+            "spline_fit": t_fit - t_path,
+            "recentre": t_recentre - t_fit,
+            "frame": t_frame - t_recentre,
+        }
         self.report = _build_report(self, ends, inlet, outlet, lumen, path, shifts, timings)
         if not self.report["centerline_inside_lumen"]:
-            log.warning("centerline leaves the voxelised lumen (min distance %.3f mm)",
-                        self.report["centerline_min_wall_distance_mm"])
+            log.warning(
+                "centerline leaves the voxelised lumen (min distance %.3f mm)",
+                self.report["centerline_min_wall_distance_mm"],
+            )
         return self
 
     # -- use ----------------------------------------------------------------------------------
-    def to_vcs(self, points: ArrayLike) -> tuple[NDArray[np.floating], NDArray[np.floating],
-                                                 NDArray[np.floating], NDArray[np.bool_]]:
+    def to_vcs(
+        self, points: ArrayLike
+    ) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating], NDArray[np.bool_]]:
         """Vessel coordinates of points (paper Eqs. 2-4); see :func:`vcs.coords.to_vcs`.
 
         Parameters
@@ -188,7 +197,7 @@ class VesselCoordinateSystem:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "VesselCoordinateSystem":
+    def from_dict(cls, d: dict) -> VesselCoordinateSystem:
         """Rebuild from :meth:`to_dict` output (the frame, length and index are recomputed)."""
         curve = BSpline(np.array(d["knots"]), np.array(d["control_points"]), int(d["degree"]))
         return cls(curve, np.array(d["v1_0"]), v1_0_from=d.get("v1_0_from", "given"))
@@ -199,8 +208,16 @@ class VesselCoordinateSystem:
         return np.asarray(self.curve.c)
 
 
-def _build_report(vcs: VesselCoordinateSystem, ends: Ends, inlet: End, outlet: End, lumen: VoxelLumen,
-                  path: NDArray[np.floating], shifts: list[float], timings: dict[str, float]) -> dict:
+def _build_report(
+    vcs: VesselCoordinateSystem,
+    ends: Ends,
+    inlet: End,
+    outlet: End,
+    lumen: VoxelLumen,
+    path: NDArray[np.floating],
+    shifts: list[float],
+    timings: dict[str, float],
+) -> dict:
     """The build report of :meth:`VesselCoordinateSystem.from_surface` (keys as in fit_report.json)."""
     curve = vcs.curve
     wall_d = lumen.distance_at(curve(np.linspace(0.02, 0.98, 961)))

@@ -1,4 +1,5 @@
 """Figures (matplotlib, Agg backend: headless)."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,5 @@
 """Sensitivity of the wall-model residuals to the knot numbers L, K, R (paper Section 3.1, Fig. 5)."""
+
 from __future__ import annotations
 
 import itertools
@@ -49,8 +50,9 @@ def parse_range(text: str, name: str) -> list[int]:
     return list(range(parts[0], parts[1] + 1, parts[2]))
 
 
-def residual_sweep(surfaces: list[Surface], Ls: Sequence[int], Ks: Sequence[int],
-                   Rs: Sequence[int]) -> list[dict[str, Any]]:
+def residual_sweep(
+    surfaces: list[Surface], Ls: Sequence[int], Ks: Sequence[int], Rs: Sequence[int]
+) -> list[dict[str, Any]]:
     """Cohort-averaged mean and 75th-percentile residuals (Eq. 11) for every (L, K, R) (Section 3.1).
 
     The centerline is fitted once per (mesh, L); the wall model once per (mesh, L, K, R).
@@ -81,8 +83,16 @@ def residual_sweep(surfaces: list[Surface], Ls: Sequence[int], Ks: Sequence[int]
     out = []
     for (L, K, R), vals in sorted(rows.items()):
         v = np.array(vals)
-        out.append({"L": L, "K": K, "R": R, "residual_mean_mm": float(v[:, 0].mean()),
-                    "residual_p75_mm": float(v[:, 1].mean()), "n_meshes": len(v)})
+        out.append(
+            {
+                "L": L,
+                "K": K,
+                "R": R,
+                "residual_mean_mm": float(v[:, 0].mean()),
+                "residual_p75_mm": float(v[:, 1].mean()),
+                "n_meshes": len(v),
+            }
+        )
     return out
 
 
@@ -111,8 +121,14 @@ def plot_sweep(rows: list[dict[str, Any]], path: Path | str) -> None:
         for r in rows:
             if r["L"] == L:
                 grid[Rs.index(r["R"]), Ks.index(r["K"])] = r["residual_mean_mm"]
-        im = ax.imshow(grid, origin="lower", aspect="auto", vmin=0, vmax=vmax,
-                       extent=(Ks[0] - 0.5, Ks[-1] + 0.5, Rs[0] - 0.5, Rs[-1] + 0.5))
+        im = ax.imshow(
+            grid,
+            origin="lower",
+            aspect="auto",
+            vmin=0,
+            vmax=vmax,
+            extent=(Ks[0] - 0.5, Ks[-1] + 0.5, Rs[0] - 0.5, Rs[-1] + 0.5),
+        )
         ax.set_xlabel("K (tau knots)")
         ax.set_ylabel("R (theta knots)")
         ax.set_title(f"L = {L}")

@@ -3,6 +3,7 @@
 x(tau, theta) = c(tau) + rho_w(tau, theta) (v1(tau) cos theta + v2(tau) sin theta) on a regular
 tau-theta grid, optional straight flow extensions, flat caps; multi-solid STL for snappyHexMesh.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -52,8 +53,9 @@ def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
     return np.concatenate([t1, t2])
 
 
-def _cap(ring: NDArray[np.floating], center: NDArray[np.floating], normal: NDArray[np.floating],
-         offset: tuple[int, int]) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
+def _cap(
+    ring: NDArray[np.floating], center: NDArray[np.floating], normal: NDArray[np.floating], offset: tuple[int, int]
+) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
     """Triangulate a flat, star-shaped cap bounded by ``ring`` (n, 3) with near-equilateral
     triangles: interior points on a hexagonal lattice + Delaunay, boundary edges kept as given.
 
@@ -97,8 +99,14 @@ def _cap(ring: NDArray[np.floating], center: NDArray[np.floating], normal: NDArr
     return verts3, idx
 
 
-def wall_mesh(model: VesselModel, *, n_tau: int | None = None, n_theta: int = 64,
-              extend_inlet: float = 0.0, extend_outlet: float = 0.0) -> WallMesh:
+def wall_mesh(
+    model: VesselModel,
+    *,
+    n_tau: int | None = None,
+    n_theta: int = 64,
+    extend_inlet: float = 0.0,
+    extend_outlet: float = 0.0,
+) -> WallMesh:
     """The model's wall (Eq. 8) on a regular tau-theta grid, closed by flat caps, outward-oriented.
 
     Parameters
@@ -162,7 +170,7 @@ def wall_mesh(model: VesselModel, *, n_tau: int | None = None, n_theta: int = 64
     n_v = len(verts)
     for k, (row, d) in enumerate(((0, d0), (n_rows - 1, d1))):
         ring = grid[row]
-        s_end = (s0 if k == 0 else s1)
+        s_end = s0 if k == 0 else s1
         center = vcs.curve(float(k)) + (s_end[-1] if len(s_end) else 0.0) * d
         v_cap, f_cap = _cap(ring, center, d, (row * n_theta, n_v))
         all_v.append(v_cap)

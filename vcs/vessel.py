@@ -1,4 +1,5 @@
 """A fitted vessel: its VCS, its wall model and where it came from; model.json I/O."""
+
 from __future__ import annotations
 
 import json
@@ -107,6 +108,13 @@ class VesselModel:
         return cls(vcs, wall, template.units, dict(template.meta))
 
     # -- geometry -----------------------------------------------------------------------------
+    def fitted_wall(self) -> WallModel:
+        """The wall model rho_w (Eq. 5); VCSInputError when the model has none (a centerline-only
+        model): refit it with `vcs fit`."""
+        if self.wall is None:
+            raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
+        return self.wall
+
     def surface_points(self, tau: ArrayLike, theta: ArrayLike) -> NDArray[np.floating]:
         """Wall points x(tau, theta) = c(tau) + rho_w(tau, theta) (v1 cos theta + v2 sin theta) (Eq. 8).
 
@@ -223,15 +231,17 @@ class VesselModel:
         except VCSInputError:
             raise  # its own message: which format version, refit
         except (KeyError, ValueError, TypeError, IndexError) as exc:
-            raise VCSInputError(f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); "
-                                "refit it with `vcs fit`") from None
+            raise VCSInputError(
+                f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); refit it with `vcs fit`"
+            ) from None
         try:
             return cls.from_dict(d)
         except VCSInputError as exc:  # e.g. wall coefficients of the wrong shape: name the file
             raise VCSInputError(f"'{path}' is not a valid model.json ({exc}); refit it with `vcs fit`") from None
         except (KeyError, ValueError, TypeError, IndexError) as exc:
-            raise VCSInputError(f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); "
-                                "refit it with `vcs fit`") from None
+            raise VCSInputError(
+                f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); refit it with `vcs fit`"
+            ) from None
 
 
 def _check_format_version(d: dict[str, Any]) -> None:
@@ -267,14 +277,23 @@ def largest_component(surf: Surface) -> Surface:
     per = np.bincount(face_lab, area)
     keep_lab = int(np.argmax(per))
     keep = face_lab == keep_lab
-    msg = (f"{len(used)} disconnected surface components; kept the largest ({keep.sum()} triangles, "
-           f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles")
+    msg = (
+        f"{len(used)} disconnected surface components; kept the largest ({keep.sum()} triangles, "
+        f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles"
+    )
     # drop the other components' vertices too: they must not size the voxel grid
     kept_v = np.unique(f[keep])
     remap = np.full(n, -1)
     remap[kept_v] = np.arange(len(kept_v))
-    return Surface(surf.vertices[kept_v], remap[f[keep]], {k: v[keep] for k, v in surf.cell_data.items()},
-                   surf.units, surf.units_source, surf.path, (*surf.warnings, msg))
+    return Surface(
+        surf.vertices[kept_v],
+        remap[f[keep]],
+        {k: v[keep] for k, v in surf.cell_data.items()},
+        surf.units,
+        surf.units_source,
+        surf.path,
+        (*surf.warnings, msg),
+    )
 
 
 def parse_point(text: str | ArrayLike | None, name: str) -> NDArray[np.floating] | None:
@@ -374,10 +393,14 @@ def fit_vessel(
             c = read_surface(cap, surf.units, check_extent=False)  # a cap is only as wide as the vessel
             caps.append((c.vertices, c.faces))
     ends = find_ends(
-        surf.vertices, surf.faces, surf.cell_data,
+        surf.vertices,
+        surf.faces,
+        surf.cell_data,
         inlet=None if p_in is None else p_in * s,
         outlet=None if p_out is None else p_out * s,
-        inlet_cap=caps[0], outlet_cap=caps[1], cap_array=cap_array,
+        inlet_cap=caps[0],
+        outlet_cap=caps[1],
+        cap_array=cap_array,
     )
     t_read = time.perf_counter()
     vcs = VesselCoordinateSystem.from_surface(
@@ -393,12 +416,16 @@ def fit_vessel(
     if wall_fit is not None:
         wr = wall_fit.report
         if wr["not_star_convex_fraction"] > 0.01:
-            warnings.append(f"{100 * wr['not_star_convex_fraction']:.1f}% of the wall is not star-convex about "
-                            "the centerline (e.g. a saccular aneurysm): left out of the wall model")
+            warnings.append(
+                f"{100 * wr['not_star_convex_fraction']:.1f}% of the wall is not star-convex about "
+                "the centerline (e.g. a saccular aneurysm): left out of the wall model"
+            )
         n_out = wr["points_not_used"]["outside_omega"]
         if n_out > 0.01 * wr["n_wall_points"]:
-            warnings.append(f"{n_out} wall points ({100 * n_out / wr['n_wall_points']:.1f}%) are outside Omega "
-                            "(lumen radius above the centerline's radius of curvature, or closest point not unique)")
+            warnings.append(
+                f"{n_out} wall points ({100 * n_out / wr['n_wall_points']:.1f}%) are outside Omega "
+                "(lumen radius above the centerline's radius of curvature, or closest point not unique)"
+            )
     report = {
         "warnings": warnings,
         "mesh": str(surf.path),

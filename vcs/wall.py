@@ -5,6 +5,7 @@ interior knots in tau (clamped, K + 4 functions) and R uniform interior knots in
 [0, 2 pi) (periodic, C2: R + 1 functions). Fitted here by one sparse linear least-squares solve
 with a small second-difference penalty (instead of the paper's SLSQP on a penalised loss).
 """
+
 from __future__ import annotations
 
 import logging
@@ -14,8 +15,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
-from scipy.sparse import linalg as sparse_linalg
 from scipy.interpolate import BSpline, NdBSpline
+from scipy.sparse import linalg as sparse_linalg
 
 from vcs.centerline import uniform_knots
 from vcs.errors import VCSInputError
@@ -102,7 +103,8 @@ def tensor_design_matrix(tau: ArrayLike, theta: ArrayLike, K: int, R: int) -> sp
     Bt = BSpline.design_matrix(np.clip(tau, 0, 1), uniform_knots(K), 3).tocsr()
     Bp = periodic_design_matrix(theta, R)
     nt, nth = Bt.shape[1], Bp.shape[1]
-    Bt.sort_indices(); Bp.sort_indices()
+    Bt.sort_indices()
+    Bp.sort_indices()
     it = Bt.indices.reshape(-1, 4)
     ip = Bp.indices.reshape(-1, 4) if Bp.nnz == 4 * Bp.shape[0] else None
     if ip is None:  # duplicate folded columns summed: fall back to a generic product
@@ -155,9 +157,7 @@ class WallModel:
                 f"but K={self.K}, R={self.R} need (K + 4, R + 1) = ({k}, {n})"
             )
         ext = self.coefficients[:, np.arange(n + 3) % n]  # periodic extension for NdBSpline
-        object.__setattr__(
-            self, "_spline", NdBSpline((uniform_knots(self.K), periodic_knots(self.R)), ext, 3)
-        )
+        object.__setattr__(self, "_spline", NdBSpline((uniform_knots(self.K), periodic_knots(self.R)), ext, 3))
 
     def __call__(self, tau: ArrayLike, theta: ArrayLike) -> NDArray[np.floating]:
         """Wall radius rho_w(tau, theta) (Eq. 5), vectorised over broadcastable inputs.
@@ -237,8 +237,9 @@ def _penalty(K: int, R: int) -> sparse.csr_matrix:
     return sparse.vstack([sparse.kron(Dt, sparse.eye(nth)), sparse.kron(sparse.eye(nt), Dp)]).tocsr()
 
 
-def lsq_wall(tau: ArrayLike, theta: ArrayLike, rho: ArrayLike, weights: ArrayLike, K: int, R: int,
-             smoothing: float = 1e-5) -> WallModel:
+def lsq_wall(
+    tau: ArrayLike, theta: ArrayLike, rho: ArrayLike, weights: ArrayLike, K: int, R: int, smoothing: float = 1e-5
+) -> WallModel:
     """Weighted least-squares fit of the wall model rho_w to (tau, theta, rho) samples (Eqs. 5-7).
 
     Minimises sum_i w_i (rho_w(tau_i, theta_i) - rho_i)^2 + lambda |D b|^2, with D the second
@@ -314,9 +315,18 @@ class WallFit:
 REASONS = {0: "used", 1: "beyond_end_planes", 2: "outside_omega", 3: "not_first_crossing", 4: "branch"}
 
 
-def fit_wall(vcs: VesselCoordinateSystem, vertices: NDArray[np.floating], faces: NDArray[np.integer], *,
-             K: int = 19, R: int = 15, smoothing: float = 1e-5, branch_rel: float = 0.12,
-             grow_rel: float = 0.3, orientation: float | None = None) -> WallFit:
+def fit_wall(
+    vcs: VesselCoordinateSystem,
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    *,
+    K: int = 19,
+    R: int = 15,
+    smoothing: float = 1e-5,
+    branch_rel: float = 0.12,
+    grow_rel: float = 0.3,
+    orientation: float | None = None,
+) -> WallFit:
     """Fit the wall model rho_w to the wall vertices of a section and compute residuals (Eqs. 5-7, 11).
 
     Vertices are left out, and counted by reason, when they lie beyond an end plane, outside
@@ -462,4 +472,6 @@ def fit_wall(vcs: VesselCoordinateSystem, vertices: NDArray[np.floating], faces:
         "wall_smoothing": smoothing,
     }
     keep = ev
-    return WallFit(model, vertices[keep], tau[keep], theta[keep], rho[keep], residual[keep], sel[keep], reason[keep], report)
+    return WallFit(
+        model, vertices[keep], tau[keep], theta[keep], rho[keep], residual[keep], sel[keep], reason[keep], report
+    )

@@ -1,4 +1,5 @@
 """Shared fixtures for the vcs tests: analytic tubes with exactly known coordinates."""
+
 from __future__ import annotations
 
 from pathlib import Path

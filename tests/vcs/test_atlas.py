@@ -1,4 +1,5 @@
 """Atlas: coregistration, shape/flow PCA, mode deformation, ridge LOO, build_atlas (Section 2.3)."""
+
 from __future__ import annotations
 
 import json
@@ -7,9 +8,23 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from vcs.atlas import (PCA, RigidTransform, align_models, build_atlas, compute_atlas, generalized_procrustes,
-                       mode_deformation, project_model, shape_matrix,
-                       procrustes, ridge_loo, status_exclusion, top_variation_mask, transform_model, wall_grid_points)
+from vcs.atlas import (
+    PCA,
+    RigidTransform,
+    align_models,
+    build_atlas,
+    compute_atlas,
+    generalized_procrustes,
+    mode_deformation,
+    procrustes,
+    project_model,
+    ridge_loo,
+    shape_matrix,
+    status_exclusion,
+    top_variation_mask,
+    transform_model,
+    wall_grid_points,
+)
 from vcs.centerline import fit_centerline
 from vcs.model import VesselCoordinateSystem
 from vcs.vessel import VesselModel
@@ -156,15 +171,28 @@ def synthetic_fields(model: VesselModel, q: float, n=(9, 8, 5)) -> dict:
     p = 100 * q * (1 - T) * (1 + 0 * RN)
     w = np.zeros((nt, nth, 3))
     w[..., 0] = 4 * q
-    return {"tau": tau, "theta": theta, "rho_n": rho_n, "U_vcs": u, "U": u, "p": p, "p_kinematic": p / 1060,
-            "WSS_vcs": w, "WSS": w}
+    return {
+        "tau": tau,
+        "theta": theta,
+        "rho_n": rho_n,
+        "U_vcs": u,
+        "U": u,
+        "p": p,
+        "p_kinematic": p / 1060,
+        "WSS_vcs": w,
+        "WSS": w,
+    }
 
 
 def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
     radii = [8.0, 9.0, 10.0, 11.0, 12.0, 9.5]
-    models = {f"P{i}": transform_model(synthetic_model(radius=r, bend=50 + 3 * i), random_rigid(20 + i))
-              for i, r in enumerate(radii)}
-    fields = {pid: synthetic_fields(m, 0.1 * (1 + i) + 0.01 * radii[i] ** 2) for i, (pid, m) in enumerate(models.items())}
+    models = {
+        f"P{i}": transform_model(synthetic_model(radius=r, bend=50 + 3 * i), random_rigid(20 + i))
+        for i, r in enumerate(radii)
+    }
+    fields = {
+        pid: synthetic_fields(m, 0.1 * (1 + i) + 0.01 * radii[i] ** 2) for i, (pid, m) in enumerate(models.items())
+    }
     statuses = {pid: {"converged": True} for pid in models}
     statuses["P5"] = {"converged": False, "reason": "max iterations"}
     atlas = build_atlas(models, fields, statuses, tmp_path, n_modes=2)
@@ -175,7 +203,7 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
     assert set(s["flow_explained_variance"]) == {"U", "p", "WSS"}
     assert set(s["shape_to_flow_regression"]["loo_r2"]) == {"U", "p", "WSS"}
     for f in s["files"].values():
-        for path in (f if isinstance(f, list) else [f]):
+        for path in f if isinstance(f, list) else [f]:
             assert (tmp_path / path).is_file(), path
     mask = top_variation_mask(atlas.flow["U"], 0, atlas.field_shapes["U"], vector=True)
     assert mask.shape == atlas.field_shapes["U"][:-1] and 0.15 < mask.mean() < 0.5

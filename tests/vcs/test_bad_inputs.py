@@ -1,6 +1,7 @@
 """Bad-input corpus for `vcs fit` (issue 7): each kind of bad input gives either a one-line error
 (exit code 2, no traceback, no model written) or a result whose fit_report.json carries an
 explicit warning. The README table lists the same cases."""
+
 from __future__ import annotations
 
 import json
@@ -15,8 +16,11 @@ from vcs.phantoms import make_phantom, sweep_tube
 
 
 def fit(mesh, out, *args):
-    return subprocess.run([sys.executable, "-m", "vcs.cli", "fit", str(mesh), "-o", str(out), *map(str, args)],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "vcs.cli", "fit", str(mesh), "-o", str(out), *map(str, args)],
+        capture_output=True,
+        text=True,
+    )
 
 
 def tube(length=100.0, r=8.0, edge=1.5):
@@ -91,7 +95,7 @@ def test_saccular_aneurysm_reports_non_star_convex_fraction(tmp_path):
         s, phi = np.broadcast_arrays(s, phi)
         # a berry on a neck: the radius rises and falls back over a narrow angle
         d = np.hypot((s - 0.5) / 0.1, np.angle(np.exp(1j * (phi - 1.0))) / 0.5)
-        return 8.0 + 14.0 * np.exp(-d**8)
+        return 8.0 + 14.0 * np.exp(-(d**8))
 
     V, F = sweep_tube(np.column_stack([0 * z, 0 * z, z]), radius, edge=1.0)
     path = save(V, F, tmp_path / "a.ply")
@@ -141,5 +145,6 @@ def test_phantom_is_fine(tmp_path):
 @pytest.mark.parametrize("bad", ["1,2", "a,b,c", "nan,0,0"])
 def test_malformed_point(tmp_path, bad):
     path = save(*tube(), tmp_path / "t.ply")
-    assert_one_line_error(fit(path, tmp_path / "o", "--units", "mm", "--inlet", bad, "--outlet", "0,0,90"),
-                          tmp_path / "o", "--inlet")
+    assert_one_line_error(
+        fit(path, tmp_path / "o", "--units", "mm", "--inlet", bad, "--outlet", "0,0,90"), tmp_path / "o", "--inlet"
+    )

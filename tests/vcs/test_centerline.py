@@ -1,4 +1,5 @@
 """The lumen path search (paper Section 2.2.1, cost 1/d) against a plain heapq A* reference."""
+
 from __future__ import annotations
 
 import heapq
@@ -65,7 +66,11 @@ def _blob_lumen(seed: int, h: float = 0.5) -> tuple[VoxelLumen, np.ndarray, np.n
     dist = np.where(inside, np.maximum(ndimage.distance_transform_edt(inside, sampling=h), 0.5 * h), 0.0)
     lumen = VoxelLumen(inside, dist, np.zeros(3), h)
     vox = np.argwhere(inside)
-    return lumen, vox[np.argmin(np.linalg.norm(vox - centres[0], axis=1))], vox[np.argmin(np.linalg.norm(vox - centres[-1], axis=1))]
+    return (
+        lumen,
+        vox[np.argmin(np.linalg.norm(vox - centres[0], axis=1))],
+        vox[np.argmin(np.linalg.norm(vox - centres[-1], axis=1))],
+    )
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -1,4 +1,5 @@
 """CLI: outputs of `vcs fit/coords/cartesian/wall/grid`, and bad input -> one line, exit code 2."""
+
 from __future__ import annotations
 
 import json
@@ -7,7 +8,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import sweep
 
 
@@ -70,8 +70,10 @@ def test_bad_mesh_files_give_one_line(tmp_path, kind):
     elif kind in ("garbage", "extension"):
         path.write_text("this is not a mesh\n")
     elif kind == "nan":
-        path.write_text("solid s\nfacet normal 0 0 1\nouter loop\nvertex nan 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
-                        "endloop\nendfacet\nendsolid s\n")
+        path.write_text(
+            "solid s\nfacet normal 0 0 1\nouter loop\nvertex nan 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+            "endloop\nendfacet\nendsolid s\n"
+        )
     r = run("fit", path, "-o", tmp_path / "out")
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
@@ -112,8 +114,20 @@ def test_wall_stl_and_grid(tube_stl, tmp_path):
     tm.merge_vertices()  # the three solids are loaded as separate parts
     assert tm.is_watertight and tm.volume > 0
     for scheme in ("cylindrical", "ogrid"):
-        r = run("grid", tmp_path / "f" / "model.json", "-o", tmp_path / f"{scheme}.vtu", "--scheme", scheme,
-                "--n-tau", 10, "--n-theta", 16, "--n-rho", 4)
+        r = run(
+            "grid",
+            tmp_path / "f" / "model.json",
+            "-o",
+            tmp_path / f"{scheme}.vtu",
+            "--scheme",
+            scheme,
+            "--n-tau",
+            10,
+            "--n-theta",
+            16,
+            "--n-rho",
+            4,
+        )
         assert r.returncode == 0, r.stderr
         g = pv.read(tmp_path / f"{scheme}.vtu")
         vol = g.compute_cell_sizes()["Volume"]

@@ -1,10 +1,11 @@
 """VCS core against analytic truth: torus-arc and helical tubes (issue 2, 'Must show')."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import sweep
+
 from vcs.ends import find_ends
 from vcs.model import VesselCoordinateSystem
 

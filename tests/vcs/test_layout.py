@@ -4,6 +4,7 @@ statistics never reach plotting.
 Every import statement counts, at module level and inside functions (lazy imports), including
 ``if TYPE_CHECKING:`` blocks. Self-contained: needs only the source tree, imports nothing of vcs.
 """
+
 from __future__ import annotations
 
 import ast
@@ -96,8 +97,10 @@ def import_graph(root: Path = VCS_DIR) -> dict[str, set[str]]:
     """
     modules = vcs_modules(root)
     top = root.name
-    return {m: {n for n in _imported_names(m, p, modules) if n == top or n.startswith(top + ".")}
-            for m, p in modules.items()}
+    return {
+        m: {n for n in _imported_names(m, p, modules) if n == top or n.startswith(top + ".")}
+        for m, p in modules.items()
+    }
 
 
 def external_imports(root: Path = VCS_DIR) -> dict[str, set[str]]:
@@ -115,8 +118,10 @@ def external_imports(root: Path = VCS_DIR) -> dict[str, set[str]]:
     """
     modules = vcs_modules(root)
     top = root.name
-    return {m: {n.split(".")[0] for n in _imported_names(m, p, modules) if n.split(".")[0] != top}
-            for m, p in modules.items()}
+    return {
+        m: {n.split(".")[0] for n in _imported_names(m, p, modules) if n.split(".")[0] != top}
+        for m, p in modules.items()
+    }
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -177,8 +182,9 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-def _path(graph: dict[str, set[str]], start: str, goal: Callable[[str], bool],
-          within: set[str] | None = None) -> list[str] | None:
+def _path(
+    graph: dict[str, set[str]], start: str, goal: Callable[[str], bool], within: set[str] | None = None
+) -> list[str] | None:
     """Shortest import chain start -> ... -> n with ``goal(n)`` (breadth first), or None."""
     prev: dict[str, str | None] = {start: None}
     queue = deque([start])
@@ -204,8 +210,12 @@ def test_import_graph_sees_lazy_and_relative_imports(tmp_path):
     (pkg / "sub" / "__init__.py").write_text("from . import b\nfrom .. import a\n")
     (pkg / "sub" / "b.py").write_text("from ..a import f\nif False:\n    from . import c\n")
     g = import_graph(pkg)
-    assert g == {"pkg": {"pkg.a"}, "pkg.a": {"pkg.sub.b"}, "pkg.sub": {"pkg.sub.b", "pkg.a"},
-                 "pkg.sub.b": {"pkg.a", "pkg.sub"}}
+    assert g == {
+        "pkg": {"pkg.a"},
+        "pkg.a": {"pkg.sub.b"},
+        "pkg.sub": {"pkg.sub.b", "pkg.a"},
+        "pkg.sub.b": {"pkg.a", "pkg.sub"},
+    }
     assert external_imports(pkg)["pkg.a"] == {"numpy"}
     assert cycles(g) == [["pkg.a", "pkg.sub.b", "pkg.a"]]
 
@@ -264,19 +274,30 @@ def test_dependency_direction():
     OpenFOAM templates) only inside vcs.cfd; no module outside vcs.cfd imports vcs.cfd except the
     CLI (none does today)."""
     external = external_imports()
-    bad = [f"{m} imports {pkg}" for m, pkgs in external.items() for pkg in pkgs
-           if pkg in ("snakemake", "workflow", "vcsflow") or (pkg == "jinja2" and not m.startswith("vcs.cfd"))]
+    bad = [
+        f"{m} imports {pkg}"
+        for m, pkgs in external.items()
+        for pkg in pkgs
+        if pkg in ("snakemake", "workflow", "vcsflow") or (pkg == "jinja2" and not m.startswith("vcs.cfd"))
+    ]
     graph = import_graph()
-    bad += [f"{m} imports {n}" for m, targets in graph.items() for n in targets
-            if n.startswith("vcs.cfd") and not m.startswith(("vcs.cfd", "vcs.cli"))]
+    bad += [
+        f"{m} imports {n}"
+        for m, targets in graph.items()
+        for n in targets
+        if n.startswith("vcs.cfd") and not m.startswith(("vcs.cfd", "vcs.cli"))
+    ]
     assert not bad, "; ".join(bad)
 
 
 def test_workflow_holds_snakemake_files_only():
     """workflow/: rules, schemas, envs and thin scripts; Python only in workflow/scripts/."""
     workflow = VCS_DIR.parent / "workflow"
-    stray = sorted(str(p.relative_to(workflow)) for p in workflow.rglob("*.py")
-                   if p.parent != workflow / "scripts" and "__pycache__" not in p.parts)
+    stray = sorted(
+        str(p.relative_to(workflow))
+        for p in workflow.rglob("*.py")
+        if p.parent != workflow / "scripts" and "__pycache__" not in p.parts
+    )
     assert not stray, f"Python outside workflow/scripts/: {stray}"
 
 

@@ -4,6 +4,7 @@ Truth used here never comes from the generator's own geometry code: analytic dis
 torus centre circle, the conftest Helix), polygon-prism volumes, a from-scratch edge/loop
 analysis, a nearest-point projection onto the centreline by Newton's method, and raw STL bytes.
 """
+
 from __future__ import annotations
 
 import json
@@ -125,7 +126,9 @@ def test_torus_distance_to_centre_circle(phantoms):
     d = np.hypot(np.hypot(V[:, 0], V[:, 1]) - 40.0, V[:, 2])
     np.testing.assert_allclose(d, 8.0, rtol=1e-6)
     s = np.linspace(0, 1, 11)
-    np.testing.assert_allclose(ph.centerline(s), np.stack([40 * np.cos(np.pi * s), 40 * np.sin(np.pi * s), 0 * s], -1), atol=1e-12)
+    np.testing.assert_allclose(
+        ph.centerline(s), np.stack([40 * np.cos(np.pi * s), 40 * np.sin(np.pi * s), 0 * s], -1), atol=1e-12
+    )
     assert V[:, 1].min() > -1e-9  # 180 deg arc: every section lies in a half-plane through the z-axis
     # Pappus: polygonal section area x centroid path; chords in s shrink it by O(dtheta^2)
     _, _, loops, _ = _topology(ph.faces)
@@ -322,7 +325,9 @@ def test_aorta_overrides_and_errors():
         make_phantom("tube", resolution=0)
     with pytest.raises(VCSInputError, match="radius of curvature"):
         make_phantom("helix", tube_radius_mm=20)
-    assert make_phantom("torus", arc_angle_deg=90.0, tube_radius_mm=5.0).params["length_mm"] == pytest.approx(20 * np.pi)
+    assert make_phantom("torus", arc_angle_deg=90.0, tube_radius_mm=5.0).params["length_mm"] == pytest.approx(
+        20 * np.pi
+    )
 
 
 @pytest.mark.parametrize("kind", KINDS)

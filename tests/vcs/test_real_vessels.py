@@ -1,12 +1,12 @@
 """Fits on every real mesh of ../shared/data/vessels with default parameters (issues 2 and 3)."""
+
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
-
-from pathlib import Path
 
 from vcs.io import read_surface
 from vcs.vessel import fit_vessel
@@ -19,8 +19,10 @@ CASES = {
     "simvascular_capped": ("simvascular_aorta_segment_capped.vtp", {}),
     "vmtk_closed": ("vmtk_aorta_segment_closed.stl", {"inlet": "219.0,290.0,25.0", "outlet": "221.3,146.5,21.7"}),
     "vmtk_bifurcation": ("vmtk_aorta_bifurcation_open.stl", {"inlet": "221,177.8,21.3", "outlet": "210.2,102.9,30.8"}),
-    "aortacfd": ("aortacfd_patient1/wall_aorta.stl", {"inlet_cap": "aortacfd_patient1/inlet.stl",
-                                                      "outlet_cap": "aortacfd_patient1/outlet4.stl"}),
+    "aortacfd": (
+        "aortacfd_patient1/wall_aorta.stl",
+        {"inlet_cap": "aortacfd_patient1/inlet.stl", "outlet_cap": "aortacfd_patient1/outlet4.stl"},
+    ),
 }
 
 
@@ -81,8 +83,9 @@ def _end_centres(data, name, model):
         ids = np.asarray(mesh.cell_data["ModelFaceID"])
         centres = [np.asarray(mesh.extract_cells(np.where(ids == k)[0]).points).mean(axis=0) * s for k in (2, 3)]
     else:
-        edges = mesh.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
-                                           non_manifold_edges=False)
+        edges = mesh.extract_feature_edges(
+            boundary_edges=True, feature_edges=False, manifold_edges=False, non_manifold_edges=False
+        )
         centres = [np.asarray(b.points).mean(axis=0) * s for b in edges.split_bodies() if b.n_points]
     pick = lambda p: min(centres, key=lambda c: np.linalg.norm(c - p))  # noqa: E731
     return [pick(model.vcs.curve(0.0)), pick(model.vcs.curve(1.0))]

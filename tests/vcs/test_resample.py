@@ -1,4 +1,5 @@
 """Resampling CFD fields on the VCS grid: analytic Poiseuille tube (VTK mesh, and OpenFOAM when installed)."""
+
 from __future__ import annotations
 
 import shutil
@@ -8,9 +9,9 @@ import pytest
 from scipy.interpolate import BSpline
 
 from vcs.centerline import uniform_knots
-from vcs.model import VesselCoordinateSystem
 from vcs.cfd.resample import load_fields, sample_mesh, write_fields
 from vcs.grid import from_vcs_components, grid_axes, grid_to_vtk, local_frame, measurement_grid, to_vcs_components
+from vcs.model import VesselCoordinateSystem
 from vcs.vessel import VesselModel
 from vcs.wall import WallModel
 
@@ -27,7 +28,7 @@ RHO = 1060.0
 def straight_model(radius_mm=RADIUS_MM, length_mm=LENGTH_MM, axis=AXIS, origin_mm=(0.0, 0.0, 0.0), L=5, K=7, R=7):
     """A straight tube model: arc-length line c(tau) = origin + tau * length * axis, rho_w = radius."""
     t = uniform_knots(L)
-    greville = np.array([t[i + 1:i + 4].mean() for i in range(L + 4)])
+    greville = np.array([t[i + 1 : i + 4].mean() for i in range(L + 4)])
     c = np.asarray(origin_mm) + greville[:, None] * length_mm * np.asarray(axis)
     curve = BSpline(t, c, 3)
     v1 = np.cross(axis, [1.0, 0.0, 0.0])
@@ -52,10 +53,13 @@ def tube_mesh():
     z = np.linspace(0, LENGTH_MM * 1e-3, nz)
     th = 2 * np.pi * np.arange(nth) / nth
     r = np.linspace(0, RADIUS_MM * 1e-3, nr)[1:]
-    e1 = np.cross(AXIS, [1.0, 0, 0]); e1 /= np.linalg.norm(e1)
+    e1 = np.cross(AXIS, [1.0, 0, 0])
+    e1 /= np.linalg.norm(e1)
     e2 = np.cross(AXIS, e1)
     Z, TH, RR = np.meshgrid(z, th, r, indexing="ij")
-    ring = (RR[..., None] * (np.cos(TH)[..., None] * e1 + np.sin(TH)[..., None] * e2) + Z[..., None] * AXIS).reshape(-1, 3)
+    ring = (RR[..., None] * (np.cos(TH)[..., None] * e1 + np.sin(TH)[..., None] * e2) + Z[..., None] * AXIS).reshape(
+        -1, 3
+    )
     pts = np.vstack([ring, z[:, None] * AXIS])
     vol = pv.PolyData(pts).delaunay_3d()
     for data, x in ((vol.point_data, vol.points), (vol.cell_data, vol.cell_centers().points)):
@@ -149,8 +153,8 @@ def test_sample_mesh_far_outside_counts_nearest(tube_mesh):
 # --------------------------------------------------------------- real OpenFOAM (colleague's runner)
 def _foam_api():
     try:
-        from vcs.phantoms.analytic import write_closed_tube_stl
         from vcs.cfd import detect_openfoam, render_case, run_case
+        from vcs.phantoms.analytic import write_closed_tube_stl
     except ImportError as exc:  # pragma: no cover - depends on the checkout
         pytest.skip(f"vcs.cfd not importable ({exc})")
     if shutil.which("simpleFoam") is None or detect_openfoam()[0] != "esi":
@@ -163,10 +167,15 @@ def poiseuille_case(tmp_path_factory):
     """The Hagen-Poiseuille tube of tests/workflow/test_openfoam.py, solved by vcs.cfd."""
     write_closed_tube_stl, render_case, run_case = _foam_api()
     tmp = tmp_path_factory.mktemp("pois_resample")
-    stl = write_closed_tube_stl(tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS)
+    stl = write_closed_tube_stl(
+        tmp / "tube.stl", radius=RADIUS_MM * 1e-3, length=LENGTH_MM * 1e-3, n_theta=96, n_z=60, axis=AXIS
+    )
     q = U_MEAN * np.pi * (RADIUS_MM * 1e-3) ** 2
-    cfg = {"mesh": {"cell_size": 1.25e-3}, "inlet": {"type": "parabolic", "flow_rate": q},
-           "solver": {"max_iterations": 800, "startup_iterations": 50, "fallback": "none"}}
+    cfg = {
+        "mesh": {"cell_size": 1.25e-3},
+        "inlet": {"type": "parabolic", "flow_rate": q},
+        "solver": {"max_iterations": 800, "startup_iterations": 50, "fallback": "none"},
+    }
     render_case(tmp / "case", stl, cfg, flavour="esi")
     status = run_case(tmp / "case", ranks=1)
     return tmp / "case", status

@@ -1,5 +1,6 @@
 """Regression tests named after defects found in review (issue 7: bad input never gives a wrong
 result or a traceback)."""
+
 from __future__ import annotations
 
 import json
@@ -52,8 +53,22 @@ def test_small_cap_files_are_accepted(tmp_path):
         disc = trimesh.creation.cylinder(radius=1.5, height=0.01, sections=32)
         disc.apply_translation([0, 0, zc])
         disc.export(tmp_path / name)
-    r = run("fit", tmp_path / "w.stl", "-o", tmp_path / "o", "--units", "mm", "--K", "7", "--R", "7",
-            "--inlet-cap", tmp_path / "in.stl", "--outlet-cap", tmp_path / "out.stl")
+    r = run(
+        "fit",
+        tmp_path / "w.stl",
+        "-o",
+        tmp_path / "o",
+        "--units",
+        "mm",
+        "--K",
+        "7",
+        "--R",
+        "7",
+        "--inlet-cap",
+        tmp_path / "in.stl",
+        "--outlet-cap",
+        tmp_path / "out.stl",
+    )
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "o" / "fit_report.json").read_text())["ends_method"] == "cap_files"
 

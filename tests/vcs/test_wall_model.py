@@ -1,4 +1,5 @@
 """Wall model rho_w (Eqs. 5-7), feature vector, residuals (Eq. 11), Eq. 8 STL, sensitivity (issue 3)."""
+
 from __future__ import annotations
 
 import json
@@ -76,8 +77,14 @@ def test_wall_stl_is_closed_outward_on_model_and_well_shaped(kind):
     assert np.abs(rho[inner] - model.wall(tau[inner], theta[inner])).max() < 1e-6
     tri = w.vertices[w.faces]
     e = [np.linalg.norm(tri[:, (i + 1) % 3] - tri[:, (i + 2) % 3], axis=1) for i in range(3)]
-    ang = [np.arccos(np.clip((e[(i + 1) % 3] ** 2 + e[(i + 2) % 3] ** 2 - e[i] ** 2)
-                             / (2 * e[(i + 1) % 3] * e[(i + 2) % 3]), -1, 1)) for i in range(3)]
+    ang = [
+        np.arccos(
+            np.clip(
+                (e[(i + 1) % 3] ** 2 + e[(i + 2) % 3] ** 2 - e[i] ** 2) / (2 * e[(i + 1) % 3] * e[(i + 2) % 3]), -1, 1
+            )
+        )
+        for i in range(3)
+    ]
     assert np.degrees(np.min(ang)) >= 15.0
 
 
@@ -87,8 +94,25 @@ def test_sensitivity_csv(tmp_path):
 
     ph = make_phantom("tube", resolution=2.0)
     write_stl(ph, tmp_path / "t.stl")
-    assert main(["sensitivity", str(tmp_path / "t.stl"), "--units", "mm", "--L", "5:9:4", "--K", "7",
-                 "--R", "5:9:4", "-o", str(tmp_path / "s")]) == 0
+    assert (
+        main(
+            [
+                "sensitivity",
+                str(tmp_path / "t.stl"),
+                "--units",
+                "mm",
+                "--L",
+                "5:9:4",
+                "--K",
+                "7",
+                "--R",
+                "5:9:4",
+                "-o",
+                str(tmp_path / "s"),
+            ]
+        )
+        == 0
+    )
     lines = (tmp_path / "s" / "sensitivity.csv").read_text().splitlines()
     assert lines[0] == "L,K,R,residual_mean_mm,residual_p75_mm,n_meshes" and len(lines) == 1 + 4
     assert (tmp_path / "s" / "sensitivity.png").stat().st_size > 5000

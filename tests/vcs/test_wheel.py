@@ -1,5 +1,6 @@
 """The wheel built by `pip wheel .` is complete: it holds the OpenFOAM templates, and a case renders
 from a non-editable install of it (no source tree on the path)."""
+
 from __future__ import annotations
 
 import subprocess
@@ -15,8 +16,12 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(REPO), "-w", str(out)],
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(REPO), "-w", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     (whl,) = out.glob("vcs_atlas-*.whl")
     return whl
@@ -24,8 +29,11 @@ def wheel(tmp_path_factory) -> Path:
 
 def test_wheel_contains_templates_and_every_package(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    templates = sorted(p.relative_to(REPO / "templates" / "openfoam").as_posix()
-                       for p in (REPO / "templates" / "openfoam").rglob("*") if p.is_file())
+    templates = sorted(
+        p.relative_to(REPO / "templates" / "openfoam").as_posix()
+        for p in (REPO / "templates" / "openfoam").rglob("*")
+        if p.is_file()
+    )
     assert templates, "no templates in the source tree"
     missing = [t for t in templates if f"vcs/cfd/templates/openfoam/{t}" not in names]
     assert not missing, f"templates missing from the wheel: {missing}"
@@ -35,8 +43,12 @@ def test_wheel_contains_templates_and_every_package(wheel):
 
 def test_case_renders_from_a_non_editable_install(wheel, tmp_path):
     site = tmp_path / "site"
-    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     script = f"""
 import vcs, vcs.cfd.openfoam as o
@@ -49,11 +61,18 @@ state = render_case("case", stl, {{"mesh": {{"cell_size": 1e-3}}}}, flavour="esi
 print(sorted(state["files"]))
 """
     env = {"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
-    r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, env=env,
-                       timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, env=env, timeout=300
+    )
     assert r.returncode == 0, r.stderr
-    for rel in ("system/controlDict", "system/snappyHexMeshDict", "system/fvSchemes", "0/U", "0/p",
-                "constant/transportProperties"):
+    for rel in (
+        "system/controlDict",
+        "system/snappyHexMeshDict",
+        "system/fvSchemes",
+        "0/U",
+        "0/p",
+        "constant/transportProperties",
+    ):
         text = (tmp_path / "case" / rel).read_text()
         assert "FoamFile" in text, rel
     assert "locationInMesh" in (tmp_path / "case" / "system" / "snappyHexMeshDict").read_text()

@@ -2,6 +2,7 @@
 aortas -> VCS fit -> wall STL -> snappyHexMesh + simpleFoam -> resampled fields -> atlas; then one
 patient's case is broken and the atlas must list it as excluded with the reason while the others
 stay in. A few minutes on 2 cores."""
+
 from __future__ import annotations
 
 import csv
@@ -10,7 +11,6 @@ import shutil
 
 import pytest
 from conftest import ci_workdir
-
 
 HAVE_FOAM = shutil.which("simpleFoam") is not None
 SEEDS = (0, 1, 2, 3)
@@ -48,8 +48,9 @@ def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path, workdi
     # a per-patient CFD failure: blockMesh cannot read its dictionary
     broken = IDS[-1]
     (res / "patients" / broken / "case_setup" / "system" / "blockMeshDict").write_text("not a dictionary\n")
-    wd.snakemake("--profile", profile, "--cores", "2", "--forcerun", f"results/patients/{broken}/status.json",
-                 timeout=3600)  # exit code 0: the failure is data, not a job failure
+    wd.snakemake(
+        "--profile", profile, "--cores", "2", "--forcerun", f"results/patients/{broken}/status.json", timeout=3600
+    )  # exit code 0: the failure is data, not a job failure
     st = json.loads((res / "patients" / broken / "status.json").read_text())
     assert st["converged"] is False and "blockMesh" in st["reason"]
     atlas = json.loads((res / "atlas" / "atlas.json").read_text())

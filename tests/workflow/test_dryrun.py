@@ -3,15 +3,14 @@
 No OpenFOAM or VCS code runs: the outputs of a finished run are faked (empty files +
 `snakemake --touch`, which records the params/code metadata the rerun triggers compare).
 """
-from __future__ import annotations
 
+from __future__ import annotations
 
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-
 
 PER_PATIENT = ["vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample"]
 IDS = ["P1", "P2", "P3"]
@@ -37,7 +36,7 @@ def test_finished_run_is_up_to_date(cohort):
 def test_editing_one_mesh_reruns_only_that_patient_and_the_atlas(cohort):
     cohort.fake_finished_run()
     with open(cohort.path / "meshes" / "p 2 scan.stl", "a") as fh:  # an edit, not just a touch:
-        fh.write("solid edited\nendsolid edited\n")             # same bytes + newer mtime is no change
+        fh.write("solid edited\nendsolid edited\n")  # same bytes + newer mtime is no change
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P2"]) | COHORT
 
 
@@ -82,49 +81,73 @@ def test_atlas_option_reruns_the_atlas_only(cohort):
 
 def test_changing_how_one_patients_ends_are_given_reruns_that_patient(cohort):
     cohort.fake_finished_run()
-    cohort.write_sheet([
-        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
-        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,90"},
-        {"id": "P3", "mesh": "meshes/p3.stl"},
-    ])
+    cohort.write_sheet(
+        [
+            {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
+            {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,90"},
+            {"id": "P3", "mesh": "meshes/p3.stl"},
+        ]
+    )
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P2"]) | COHORT
 
 
 def test_adding_a_patient_runs_its_chain_and_the_atlas(cohort):
     cohort.fake_finished_run()
     (cohort.path / "meshes" / "p4.stl").write_text("solid empty\nendsolid empty\n")
-    cohort.write_sheet([
-        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
-        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
-        {"id": "P3", "mesh": "meshes/p3.stl"},
-        {"id": "P4", "mesh": "meshes/p4.stl"},
-    ])
+    cohort.write_sheet(
+        [
+            {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
+            {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
+            {"id": "P3", "mesh": "meshes/p3.stl"},
+            {"id": "P4", "mesh": "meshes/p4.stl"},
+        ]
+    )
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P4"]) | COHORT
 
 
 def test_mesh_path_with_spaces_is_quoted(cohort):
     r = cohort.snakemake("-n", "-p", "--forcerun", "vcs_fit")
-    fit_cmds = [ln for ln in (r.stdout + r.stderr).splitlines() if ln.lstrip().startswith("vcs fit")
-                or "vcs fit " in ln]
+    fit_cmds = [
+        ln for ln in (r.stdout + r.stderr).splitlines() if ln.lstrip().startswith("vcs fit") or "vcs fit " in ln
+    ]
     p2 = [c for c in fit_cmds if "p 2 scan" in c]
     assert p2 and "'meshes/p 2 scan.stl'" in p2[0], fit_cmds
     assert "--inlet 0,0,0 --outlet 0,0,100" in p2[0]
 
 
 def test_demo_rows_generate_their_phantoms(tmp_path, workdir_factory):
-    wd = workdir_factory(tmp_path, [{"id": f"demo_{s}", "mesh": f"results/demo/aorta_seed{s}.stl", "units": "mm"}
-                                 for s in (0, 1, 2)])
+    wd = workdir_factory(
+        tmp_path, [{"id": f"demo_{s}", "mesh": f"results/demo/aorta_seed{s}.stl", "units": "mm"} for s in (0, 1, 2)]
+    )
     planned = wd.planned_jobs()
     assert {("vcs_phantom", f"aorta_seed{s}") for s in (0, 1, 2)} <= planned
     assert chain(PER_PATIENT, ["demo_0", "demo_1", "demo_2"]) | COHORT <= planned
 
 
 def test_default_config_is_the_eight_phantom_demo(repo):
-    r = subprocess.run([str(Path(sys.executable).parent / "snakemake"), "-s", str(repo / "Snakefile"), "-d", str(repo),
-                        "-n", "--quiet", "rules", "--forceall"], capture_output=True, text=True, cwd=repo, timeout=300)
+    r = subprocess.run(
+        [
+            str(Path(sys.executable).parent / "snakemake"),
+            "-s",
+            str(repo / "Snakefile"),
+            "-d",
+            str(repo),
+            "-n",
+            "--quiet",
+            "rules",
+            "--forceall",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=repo,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
-    counts = dict(ln.split()[:2] for ln in r.stdout.splitlines() if ln.split()[:1] and ln.split()[0] in
-                  ("vcs_phantom", "vcs_fit", "openfoam_solve", "atlas_build"))
+    counts = dict(
+        ln.split()[:2]
+        for ln in r.stdout.splitlines()
+        if ln.split()[:1] and ln.split()[0] in ("vcs_phantom", "vcs_fit", "openfoam_solve", "atlas_build")
+    )
     assert counts == {"vcs_phantom": "8", "vcs_fit": "8", "openfoam_solve": "8", "atlas_build": "1"}
 
 
@@ -158,8 +181,18 @@ def test_missing_mesh_fails_with_one_line(cohort):
 
 
 def test_ends_given_twice_fail_with_one_line(cohort):
-    cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": "0,0,0", "outlet": "1,1,1",
-                         "inlet_cap": "meshes/p3.stl", "outlet_cap": "meshes/p3.stl"}])
+    cohort.write_sheet(
+        [
+            {
+                "id": "P1",
+                "mesh": "meshes/p1.stl",
+                "inlet": "0,0,0",
+                "outlet": "1,1,1",
+                "inlet_cap": "meshes/p3.stl",
+                "outlet_cap": "meshes/p3.stl",
+            }
+        ]
+    )
     assert "not both" in _one_line_error(cohort)
 
 

@@ -10,6 +10,7 @@ GitHub issue 'Reliability', item 3). One coarse synthetic aorta with the CI sett
 * a diverging simpleFoam (classic SIMPLE without under-relaxation: floating point exception,
   non-zero exit) likewise.
 """
+
 from __future__ import annotations
 
 import json
@@ -24,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import with_ci_config
 import yaml
+from conftest import with_ci_config
 
 REPO = Path(__file__).resolve().parents[2]
 SNAKEFILE = REPO / "Snakefile"
@@ -33,7 +34,7 @@ SNAKEMAKE = Path(sys.executable).parent / "snakemake"
 PROFILE = str(REPO / "profiles" / "local")
 HAVE_FOAM = shutil.which("simpleFoam") is not None
 PID = "demo_aorta_0"
-STARTUP = 30              # solver.startup_iterations of config/ci.yaml
+STARTUP = 30  # solver.startup_iterations of config/ci.yaml
 FOAM_PROCESSES = ("simpleFoam", "mpirun", "orterun", "prterun", "orted")
 
 pytestmark = [
@@ -58,11 +59,28 @@ def prepared(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("faults_prepared")
     (path / "config.yaml").write_text(yaml.safe_dump(_ci_config(), sort_keys=False))
     (path / "patients.tsv").write_text(
-        "id\tmesh\tunits\n" + "".join(f"{r['id']}\t{r['mesh']}\t{r['units']}\n" for r in ROWS))
-    r = subprocess.run([str(SNAKEMAKE), "-s", str(SNAKEFILE), "-d", str(path), "--configfile",
-                        str(path / "config.yaml"), "--profile", PROFILE, "--cores", "2",
-                        f"results/patients/{PID}/case_setup"], cwd=path, capture_output=True, text=True,
-                       timeout=900)
+        "id\tmesh\tunits\n" + "".join(f"{r['id']}\t{r['mesh']}\t{r['units']}\n" for r in ROWS)
+    )
+    r = subprocess.run(
+        [
+            str(SNAKEMAKE),
+            "-s",
+            str(SNAKEFILE),
+            "-d",
+            str(path),
+            "--configfile",
+            str(path / "config.yaml"),
+            "--profile",
+            PROFILE,
+            "--cores",
+            "2",
+            f"results/patients/{PID}/case_setup",
+        ],
+        cwd=path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     return path
 
@@ -134,21 +152,35 @@ def _rule_errors(r: subprocess.CompletedProcess) -> set[str]:
 
 
 def test_killed_solver_rerun_restarts_from_a_clean_case_and_matches_an_uninterrupted_run(wd):
-    wd.update_config("cfd", "ranks", 2)   # decomposed: the crash leaves processor* dirs behind
+    wd.update_config("cfd", "ranks", 2)  # decomposed: the crash leaves processor* dirs behind
     target = f"results/patients/{PID}/fields.npz"
     res = wd.path / "results" / "patients" / PID
     case = res / "case"
     main_log = case / "logs" / "log.simpleFoam"
 
-    cmd = [str(SNAKEMAKE), "-s", str(SNAKEFILE), "-d", str(wd.path), "--configfile", str(wd.config_file),
-           "--profile", PROFILE, "--cores", "2", target]
+    cmd = [
+        str(SNAKEMAKE),
+        "-s",
+        str(SNAKEFILE),
+        "-d",
+        str(wd.path),
+        "--configfile",
+        str(wd.config_file),
+        "--profile",
+        PROFILE,
+        "--cores",
+        "2",
+        target,
+    ]
     with open(wd.path / "killed_run.log", "w") as out:
         proc = subprocess.Popen(cmd, cwd=wd.path, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         deadline = time.monotonic() + 600
         while not (_iterations(main_log) >= STARTUP + 5 and _foam_pids(case)):
-            assert proc.poll() is None, "snakemake ended before simpleFoam's main stage could be killed:\n" + (
-                wd.path / "killed_run.log").read_text()[-3000:]
+            assert proc.poll() is None, (
+                "snakemake ended before simpleFoam's main stage could be killed:\n"
+                + (wd.path / "killed_run.log").read_text()[-3000:]
+            )
             assert not (res / "status.json").exists(), "the solve finished before it could be killed"
             assert time.monotonic() < deadline, "simpleFoam's main stage did not start within 600 s"
             time.sleep(0.05)
@@ -175,7 +207,7 @@ def test_killed_solver_rerun_restarts_from_a_clean_case_and_matches_an_uninterru
     # plant stale state that a rerun must not trust or keep
     (case / "STALE_FROM_KILLED_RUN").write_text("must not survive the rerun\n")
     stale_time = case / "processor0" / "999"
-    shutil.copytree(case / "processor0" / str(STARTUP), stale_time)   # startFrom latestTime would pick it
+    shutil.copytree(case / "processor0" / str(STARTUP), stale_time)  # startFrom latestTime would pick it
     (case / "processor7").mkdir()
 
     # without --rerun-incomplete the partial case is refused as incomplete ...
@@ -185,13 +217,13 @@ def test_killed_solver_rerun_restarts_from_a_clean_case_and_matches_an_uninterru
     # after a hard kill Snakemake's lock stays: a real run refuses to start; the recovery is --unlock
     r = wd.snakemake("--profile", PROFILE, "--cores", "2", target, check=False)
     assert r.returncode != 0 and "Directory cannot be locked" in r.stdout + r.stderr, r.stdout[-2000:]
-    assert (case / "STALE_FROM_KILLED_RUN").exists()   # refused before touching anything
+    assert (case / "STALE_FROM_KILLED_RUN").exists()  # refused before touching anything
     wd.snakemake("--unlock")
     # ... the local profile (rerun-incomplete: true) re-runs the solve
     r = wd.snakemake("--profile", PROFILE, "--cores", "2", target, timeout=900)
     jobs = _jobs(r)
     assert ("openfoam_solve", PID) in jobs and ("fields_sample", PID) in jobs, jobs
-    assert ("openfoam_case", PID) not in jobs, jobs   # the rendered case is reused, not the solved one
+    assert ("openfoam_case", PID) not in jobs, jobs  # the rendered case is reused, not the solved one
 
     # a fresh case: nothing of the killed run left
     assert not (case / "STALE_FROM_KILLED_RUN").exists()
@@ -212,15 +244,25 @@ def test_killed_solver_rerun_restarts_from_a_clean_case_and_matches_an_uninterru
     r = wd.snakemake("--profile", PROFILE, "--cores", "2", target, "--forcerun", "openfoam_solve", timeout=900)
     assert ("openfoam_solve", PID) in _jobs(r)
     reference = _status(wd)
-    for key in ("converged", "iterations", "stage_iterations", "final_residuals", "cells", "mass_imbalance",
-                "continuity_errors", "flow_rates", "patch_pressure", "wall_shear_stress_Pa"):
+    for key in (
+        "converged",
+        "iterations",
+        "stage_iterations",
+        "final_residuals",
+        "cells",
+        "mass_imbalance",
+        "continuity_errors",
+        "flow_rates",
+        "patch_pressure",
+        "wall_shear_stress_Pa",
+    ):
         assert resumed[key] == reference[key], key
     # exactly equal: the same binary solving the same case with the same decomposition is
     # deterministic, so ANY difference would be state leaking from the killed run
     with np.load(res / "fields.npz") as z:
         assert sorted(z.files) == sorted(resumed_fields)
         for k in z.files:
-            if not k.endswith("_time_s"):   # wall-clock timings of the resampling
+            if not k.endswith("_time_s"):  # wall-clock timings of the resampling
                 np.testing.assert_array_equal(z[k], resumed_fields[k], err_msg=k)
         assert z["time"] == resumed["iterations"] and np.isfinite(z["U"]).all() and np.isfinite(z["p"]).all()
 
@@ -243,7 +285,7 @@ def _assert_kept_out_of_the_atlas(wd, r: subprocess.CompletedProcess, words: str
 
 
 def test_snappyhexmesh_failure_marks_the_patient_failed_with_the_log(wd):
-    wd.update_config("cfd", "mesh", "inside_point", [1.0, 1.0, 1.0])   # 1 m away: outside the background mesh
+    wd.update_config("cfd", "mesh", "inside_point", [1.0, 1.0, 1.0])  # 1 m away: outside the background mesh
     r = wd.snakemake("--profile", PROFILE, "--cores", "2", check=False, timeout=900)
     st = _status(wd)
     case = wd.path / "results" / "patients" / PID / "case"
@@ -274,7 +316,7 @@ def test_case_setup_failure_is_recorded_not_a_job_failure(wd):
 def test_diverging_solver_is_recorded_not_a_job_failure(wd):
     from vcs.atlas import status_exclusion
 
-    cfg = wd.config()   # classic SIMPLE without under-relaxation: blows up within ~40 iterations
+    cfg = wd.config()  # classic SIMPLE without under-relaxation: blows up within ~40 iterations
     cfg["cfd"]["solver"].update(consistent=False, relax_U=1.0, relax_p=1.0)
     wd.write_config(cfg)
     r = wd.snakemake("--profile", PROFILE, "--cores", "2", check=False, timeout=900)

@@ -1,4 +1,5 @@
 """vcs.cfd: templates (both flavours) and real OpenFOAM runs (marker ``openfoam``)."""
+
 from __future__ import annotations
 
 import re
@@ -8,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vcs.phantoms.analytic import write_closed_tube_stl
 from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case
+from vcs.phantoms.analytic import write_closed_tube_stl
 
-R = 0.01            # tube radius [m]
-L = 0.12            # tube length [m]
+R = 0.01  # tube radius [m]
+L = 0.12  # tube length [m]
 AXIS = np.array([0.03, 0.02, 1.0]) / np.linalg.norm([0.03, 0.02, 1.0])  # ~2 deg tilt: see write_closed_tube_stl
-Q_POIS = 2.0e-5     # m3/s -> U_mean 0.064 m/s, Re = 378 (parabolic inlet: developed from the start)
+Q_POIS = 2.0e-5  # m3/s -> U_mean 0.064 m/s, Re = 378 (parabolic inlet: developed from the start)
 HAVE_FOAM = shutil.which("simpleFoam") is not None and detect_openfoam()[0] == "esi"
 needs_foam = pytest.mark.skipif(not HAVE_FOAM, reason="Debian's ESI OpenFOAM (simpleFoam) not installed")
 
@@ -71,7 +72,7 @@ def test_render_org10_is_v10_native_and_parses(tmp_path):
     assert "#includeFunc wallShearStress" in ctl
     assert "#includeFunc residuals(p, U)" in ctl
     assert "#includeFunc patchFlowRate(funcName=flowRate_inlet, patch=inlet)" in ctl
-    assert "version     2.0" not in ctl        # v10 headers carry no version entry
+    assert "version     2.0" not in ctl  # v10 headers carry no version entry
     sol = ParsedParameterFile(str(case / "system/fvSolution"))
     assert float(sol["SIMPLE"]["residualControl"]["p"]) == pytest.approx(1e-5)
     u = ParsedParameterFile(str(case / "0/U"))
@@ -154,18 +155,24 @@ def test_hagen_poiseuille(poiseuille_serial):
     assert st["iterations"] < 800
     assert st["mass_imbalance"] < 1e-6
     assert st["inlet"]["flux_error_rel"] < 1e-9
-    pf = st["pyfoam_log_analysis"]            # PyFoam's analyzer agrees with the own log parser
+    pf = st["pyfoam_log_analysis"]  # PyFoam's analyzer agrees with the own log parser
     assert pf["last_iteration"] == pytest.approx(st["iterations"])
     assert pf["initial_residuals"]["p"] == pytest.approx(st["final_residuals"]["p"])
-    for f in ("residuals.csv", "residuals.png", "status.json", "logs/log.snappyHexMesh", "logs/log.checkMesh",
-              "logs/log.simpleFoam"):
+    for f in (
+        "residuals.csv",
+        "residuals.png",
+        "status.json",
+        "logs/log.snappyHexMesh",
+        "logs/log.checkMesh",
+        "logs/log.simpleFoam",
+    ):
         assert (tmp / "serial" / f).exists(), f
     nu, rho = DEFAULTS["physics"]["nu"], DEFAULTS["physics"]["rho"]
     mu = nu * rho
     dp_k, length, wss_k = _sections(tmp / "serial", st)
     dp_pa, wss_pa = dp_k * rho, wss_k * rho
-    dp_hp = 8 * mu * length * Q_POIS / (np.pi * R ** 4)
-    u_mean = Q_POIS / (np.pi * R ** 2)
+    dp_hp = 8 * mu * length * Q_POIS / (np.pi * R**4)
+    u_mean = Q_POIS / (np.pi * R**2)
     wss_hp = 4 * mu * u_mean / R
     print(f"dp {dp_pa:.5g} Pa vs HP {dp_hp:.5g} Pa; WSS {wss_pa:.5g} Pa vs HP {wss_hp:.5g} Pa")
     assert dp_pa == pytest.approx(dp_hp, rel=0.03)
@@ -191,9 +198,10 @@ def test_serial_and_parallel_agree(poiseuille_serial):
 @needs_foam
 def test_jet_inlet_flux(tmp_path):
     stl = write_closed_tube_stl(tmp_path / "tube.stl", radius=R, length=0.06, n_theta=96, n_z=30)
-    cfg = {"mesh": {"cell_size": 1.25e-3},
-           "solver": {"max_iterations": 30, "startup_iterations": 10, "fallback": "average",
-                      "average_iterations": 20}}
+    cfg = {
+        "mesh": {"cell_size": 1.25e-3},
+        "solver": {"max_iterations": 30, "startup_iterations": 10, "fallback": "average", "average_iterations": 20},
+    }
     render_case(tmp_path / "jet", stl, cfg, flavour="esi")
     st = run_case(tmp_path / "jet")
     assert st["mesh_ok"], st["reason"]

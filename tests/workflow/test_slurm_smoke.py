@@ -60,15 +60,20 @@ def _wait_job(cluster, jobid: str, timeout: float = 60) -> str:
         if state in ("COMPLETED", "FAILED", "CANCELLED", "TIMEOUT", "NODE_FAIL", "OUT_OF_MEMORY"):
             return state
         time.sleep(0.5)
-    raise AssertionError(f"job {jobid} not finished after {timeout}s (state {state!r})\n"
-                         + cluster.log_tails())
+    raise AssertionError(f"job {jobid} not finished after {timeout}s (state {state!r})\n" + cluster.log_tails())
 
 
-def test_sbatch_wrap(slurm_cluster, tmp_path):
+def test_sbatch_wrap(slurm_cluster, tmp_path):  # noqa: F811 (the fixture imported above)
     out = tmp_path / "wrap.out"
     r = slurm_cluster.run(
-        "sbatch", "--parsable", "-p", slurm_cluster.partition, "-o", str(out),
-        "--wrap", 'echo "job=$SLURM_JOB_ID node=$SLURMD_NODENAME"',
+        "sbatch",
+        "--parsable",
+        "-p",
+        slurm_cluster.partition,
+        "-o",
+        str(out),
+        "--wrap",
+        'echo "job=$SLURM_JOB_ID node=$SLURMD_NODENAME"',
     )
     jobid = r.stdout.strip().split(";")[0]
     assert jobid.isdigit(), r
@@ -78,28 +83,32 @@ def test_sbatch_wrap(slurm_cluster, tmp_path):
     assert f"node={slurm_cluster.nodename}" in text
 
 
-def test_snakemake_slurm_executor(slurm_cluster, tmp_path):
+def test_snakemake_slurm_executor(slurm_cluster, tmp_path):  # noqa: F811
     if slurm_cluster.nested_srun_problem:
         pytest.skip(slurm_cluster.nested_srun_problem)
     (tmp_path / "Snakefile").write_text(SNAKEFILE)
     cmd = _snakemake_exe() + [
-        "--profile", str(REPO / "profiles" / "slurm"),
-        "--snakefile", str(tmp_path / "Snakefile"),
-        "--directory", str(tmp_path),
+        "--profile",
+        str(REPO / "profiles" / "slurm"),
+        "--snakefile",
+        str(tmp_path / "Snakefile"),
+        "--directory",
+        str(tmp_path),
         # cluster-specific overrides (also set in the profile, repeated so this
         # test does not depend on the profile's test-cluster defaults):
         *SNAKEMAKE_SLURM_ARGS,
-        "--set-resources", f"write_jobid:slurm_partition={slurm_cluster.partition}",
-        "--latency-wait", "5",
-        "--retries", "0",
+        "--set-resources",
+        f"write_jobid:slurm_partition={slurm_cluster.partition}",
+        "--latency-wait",
+        "5",
+        "--retries",
+        "0",
         "--slurm-keep-successful-logs",
     ]
     t0 = time.monotonic()
-    r = subprocess.run(cmd, cwd=tmp_path, env=slurm_cluster.env, capture_output=True, text=True,
-                       timeout=150)
+    r = subprocess.run(cmd, cwd=tmp_path, env=slurm_cluster.env, capture_output=True, text=True, timeout=150)
     took = time.monotonic() - t0
-    assert r.returncode == 0, (f"snakemake failed ({took:.0f}s):\n{r.stdout}\n{r.stderr}\n"
-                               + slurm_cluster.log_tails())
+    assert r.returncode == 0, f"snakemake failed ({took:.0f}s):\n{r.stdout}\n{r.stderr}\n" + slurm_cluster.log_tails()
     ids = []
     for i in (1, 2):
         f = tmp_path / "out" / f"{i}.txt"

@@ -20,6 +20,7 @@ the chain are deterministic) and an identical atlas.json (patient lists, scores,
 Needs root, slurm-wlm + munge (else the ``slurm_cluster`` fixture skips) and OpenFOAM.
 About 3 minutes on 2 cores (local run ~35 s, SLURM run ~140 s: 19 sbatch jobs).
 """
+
 from __future__ import annotations
 
 import json
@@ -30,9 +31,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ci_workdir
 import yaml
-
+from conftest import ci_workdir
 from slurm_cluster import SNAKEMAKE_SLURM_ARGS, missing_requirements
 
 HAVE_FOAM = shutil.which("simpleFoam") is not None
@@ -95,17 +95,23 @@ def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, rep
     expected = _planned(slurm)
     assert len(expected) == 5 * len(IDS) + len(SEEDS) + 1, expected  # 5 per patient, phantoms, atlas
     r = slurm.snakemake(
-        "--profile", str(repo / "profiles" / "slurm"),
+        "--profile",
+        str(repo / "profiles" / "slurm"),
         *SNAKEMAKE_SLURM_ARGS,  # no --set/--default-resources: they would replace the profile's
-        "--latency-wait", "5",
-        "--retries", "0",
+        "--latency-wait",
+        "5",
+        "--retries",
+        "0",
         "--slurm-keep-successful-logs",
-        check=False, timeout=1500, env=slurm_cluster.env,
+        check=False,
+        timeout=1500,
+        env=slurm_cluster.env,
     )
     t_slurm = time.monotonic() - t0 - t_local
     (slurm.path / "snakemake.out").write_text(r.stdout + "\n----- stderr -----\n" + r.stderr)  # for post-mortems
-    assert r.returncode == 0, (f"SLURM run failed ({t_slurm:.0f} s):\n{r.stdout[-4000:]}\n{r.stderr[-6000:]}\n"
-                               + slurm_cluster.log_tails())
+    assert r.returncode == 0, (
+        f"SLURM run failed ({t_slurm:.0f} s):\n{r.stdout[-4000:]}\n{r.stderr[-6000:]}\n" + slurm_cluster.log_tails()
+    )
 
     # ---- (1) every job was its own sbatch job that completed
     jobs = _slurm_jobs(slurm)
@@ -118,10 +124,14 @@ def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, rep
     submitted = {Path(log): jid for jid, log in _SUBMITTED.findall(r.stdout + r.stderr)}
     root = slurm.path / ".snakemake" / "slurm_logs"
     assert submitted == {root / f"rule_{rule}" / wc / f"{jid}.log": jid for (rule, wc), (jid,) in jobs.items()}, (
-        submitted, jobs)
+        submitted,
+        jobs,
+    )
     ctld_log = (slurm_cluster.workdir / "slurmctld.log").read_text(errors="replace")
     for jid in job_ids:
-        assert re.search(rf"_job_complete: JobId={jid} WEXITSTATUS 0\b", ctld_log), f"job {jid} not completed in slurmctld.log"
+        assert re.search(rf"_job_complete: JobId={jid} WEXITSTATUS 0\b", ctld_log), (
+            f"job {jid} not completed in slurmctld.log"
+        )
     # the job's own log is the inner (jobstep) Snakemake running exactly that rule
     for (rule, wc), (jid,) in jobs.items():
         text = (root / f"rule_{rule}" / wc / f"{jid}.log").read_text(errors="replace")

@@ -19,6 +19,7 @@ The statistics modules (procrustes, pca, regression, cohort) are pure numpy/scip
 :mod:`vcs.atlas.plots`; plotting imports them, and :mod:`vcs.atlas.build` (imported here) imports
 the plotting module only when it writes figures.
 """
+
 from vcs.atlas.build import build_atlas
 from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas, project_model, status_exclusion
 from vcs.atlas.pca import (

@@ -4,6 +4,7 @@ atlas.npz, and the figures (:mod:`vcs.atlas.plots`).
 The one module that uses both the atlas statistics and its plotting; the plotting module is
 imported only when figures are asked for.
 """
+
 from __future__ import annotations
 
 import json
@@ -22,9 +23,16 @@ if TYPE_CHECKING:
 log = logging.getLogger("vcs.atlas")  # the logger name of the former vcs/atlas.py: same log lines
 
 
-def build_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[str, Any] | str | Path],
-                statuses: Mapping[str, Mapping[str, Any] | None], out_dir: str | Path, *, n_modes: int = 3,
-                figures: bool = True, **options: Any) -> Atlas:
+def build_atlas(
+    models: Mapping[str, VesselModel],
+    fields: Mapping[str, Mapping[str, Any] | str | Path],
+    statuses: Mapping[str, Mapping[str, Any] | None],
+    out_dir: str | Path,
+    *,
+    n_modes: int = 3,
+    figures: bool = True,
+    **options: Any,
+) -> Atlas:
     """Compute the atlas (:func:`vcs.atlas.cohort.compute_atlas`) and write it to ``out_dir``.
 
     Writes ``atlas.json`` (patients included/excluded with reasons, explained variances, scores,
@@ -61,8 +69,10 @@ def build_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[
             loaded[pid] = f
     atlas = compute_atlas(models, loaded, statuses, n_modes=n_modes, **options)
     summary = atlas_summary(atlas)
-    arrays: dict[str, Any] = {**atlas.shape.arrays("shape"),
-                              **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{f}").items()}}
+    arrays: dict[str, Any] = {
+        **atlas.shape.arrays("shape"),
+        **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{f}").items()},
+    }
     arrays.update({f"grid_{k}": v for k, v in atlas.grid.items()})
     np.savez_compressed(out / "atlas.npz", **arrays)
     if figures:

@@ -3,6 +3,7 @@ shape -> flow regression of the included patients, as arrays (no files; see :mod
 
 Pure numpy/scipy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -108,11 +109,21 @@ class Atlas:
     alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
 
 
-def compute_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mapping[str, Any]],
-                  statuses: Mapping[str, Mapping[str, Any] | None], *, n_modes: int = 3,
-                  n_regression_scores: int | None = None, scale: bool = False, n_tau_align: int = 40,
-                  n_theta_align: int = 24, flow_frame: str = "vcs", flow_fields: Sequence[str] = FLOW_FIELDS,
-                  shape_block: str = "all", accept_relaxed: bool = False) -> Atlas:
+def compute_atlas(
+    models: Mapping[str, VesselModel],
+    fields: Mapping[str, Mapping[str, Any]],
+    statuses: Mapping[str, Mapping[str, Any] | None],
+    *,
+    n_modes: int = 3,
+    n_regression_scores: int | None = None,
+    scale: bool = False,
+    n_tau_align: int = 40,
+    n_theta_align: int = 24,
+    flow_frame: str = "vcs",
+    flow_fields: Sequence[str] = FLOW_FIELDS,
+    shape_block: str = "all",
+    accept_relaxed: bool = False,
+) -> Atlas:
     """Coregistration, shape PCA, flow PCA and shape -> flow regression of a cohort.
 
     Parameters
@@ -161,30 +172,55 @@ def compute_atlas(models: Mapping[str, VesselModel], fields: Mapping[str, Mappin
     patients = [pid for pid in models if pid not in excluded]
     if len(patients) < 3:
         raise VCSInputError(f"an atlas needs at least 3 included patients, got {len(patients)} (excluded: {excluded})")
-    shapes0 = {f: np.shape(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f])
-               for f in flow_fields}
+    shapes0 = {
+        f: np.shape(np.asarray(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f]))
+        for f in flow_fields
+    }
     for pid in patients:
         for f in flow_fields:
             key = f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f
-            if np.shape(fields[pid].get(key)) != shapes0[f]:
+            if np.shape(np.asarray(fields[pid].get(key))) != shapes0[f]:
                 raise VCSInputError(
-                    f"patient {pid}: field {key} has shape {np.shape(fields[pid].get(key))}, patient {patients[0]} "
+                    f"patient {pid}: field {key} has shape {np.shape(np.asarray(fields[pid].get(key)))}, "
+                    f"patient {patients[0]} "
                     f"{shapes0[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
                 )
-    aligned, transforms, report = align_models([models[p] for p in patients], n_tau=n_tau_align,
-                                               n_theta=n_theta_align, scale=scale)
+    aligned, transforms, report = align_models(
+        [models[p] for p in patients], n_tau=n_tau_align, n_theta=n_theta_align, scale=scale
+    )
     gpa_mean = report.pop("mean_points_mm")
     shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
-    flow = {f: PCA.from_data(np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients]), n_modes)
-            for f in flow_fields}
+    flow = {
+        f: PCA.from_data(np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients]), n_modes)
+        for f in flow_fields
+    }
     k = min(n_regression_scores or n_modes, shape.n_modes)
     regression = {f: ridge_loo(shape.scores[:, :k], flow[f].scores) for f in flow_fields}
     f0 = fields[patients[0]]
     grid = {key: np.asarray(f0[key]) for key in ("tau", "theta", "rho_n") if key in f0}
-    return Atlas(patients, excluded, aligned, transforms, report, shape, flow, shapes0, grid, regression,
-                 {"n_modes": n_modes, "n_regression_scores": k, "scale": scale, "flow_frame": flow_frame,
-                  "n_tau_align": n_tau_align, "n_theta_align": n_theta_align,
-                  "shape_block": shape_block, "accept_relaxed": accept_relaxed}, gpa_mean)
+    return Atlas(
+        patients,
+        excluded,
+        aligned,
+        transforms,
+        report,
+        shape,
+        flow,
+        shapes0,
+        grid,
+        regression,
+        {
+            "n_modes": n_modes,
+            "n_regression_scores": k,
+            "scale": scale,
+            "flow_frame": flow_frame,
+            "n_tau_align": n_tau_align,
+            "n_theta_align": n_theta_align,
+            "shape_block": shape_block,
+            "accept_relaxed": accept_relaxed,
+        },
+        gpa_mean,
+    )
 
 
 def project_model(atlas: Atlas, model: VesselModel, *, n_modes: int | None = None) -> dict[str, Any]:
@@ -223,8 +259,14 @@ def project_model(atlas: Atlas, model: VesselModel, *, n_modes: int | None = Non
     k = atlas.shape.n_modes if n_modes is None else min(n_modes, atlas.shape.n_modes)
     s = atlas.shape.transform(a)[:k]
     a_hat = atlas.shape.mean + s @ atlas.shape.components[:k]
-    return {"scores": s, "scores_sigma": s / atlas.shape.sigma[:k], "reconstruction": a_hat,
-            "error": float(np.linalg.norm(a - a_hat)), "transform": T, "aligned_model": aligned}
+    return {
+        "scores": s,
+        "scores_sigma": s / atlas.shape.sigma[:k],
+        "reconstruction": a_hat,
+        "error": float(np.linalg.norm(a - a_hat)),
+        "transform": T,
+        "aligned_model": aligned,
+    }
 
 
 def atlas_summary(atlas: Atlas) -> dict[str, Any]:
@@ -245,20 +287,24 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         "patients_included": list(atlas.patients),
         "patients_excluded": [{"id": p, "reason": r} for p, r in atlas.excluded.items()],
         "options": atlas.options,
-        "alignment": {**atlas.alignment_report,
-                      "transforms": {p: t.to_dict() for p, t in zip(atlas.patients, atlas.transforms)}},
+        "alignment": {
+            **atlas.alignment_report,
+            "transforms": {p: t.to_dict() for p, t in zip(atlas.patients, atlas.transforms)},
+        },
         "shape_explained_variance": atlas.shape.explained_variance_ratio.tolist(),
         "shape_sigma": atlas.shape.sigma.tolist(),
         "shape_scores": {p: s.tolist() for p, s in zip(atlas.patients, atlas.shape.scores)},
         "flow_explained_variance": {f: pca.explained_variance_ratio.tolist() for f, pca in atlas.flow.items()},
         "flow_sigma": {f: pca.sigma.tolist() for f, pca in atlas.flow.items()},
-        "flow_scores": {f: {p: s.tolist() for p, s in zip(atlas.patients, pca.scores)}
-                        for f, pca in atlas.flow.items()},
+        "flow_scores": {
+            f: {p: s.tolist() for p, s in zip(atlas.patients, pca.scores)} for f, pca in atlas.flow.items()
+        },
         "shape_to_flow_regression": {
             "method": "ridge on the first k standardised shape scores, alpha by inner leave-one-out; "
-                      "R^2 by outer leave-one-out (1 - PRESS / SS_tot)",
+            "R^2 by outer leave-one-out (1 - PRESS / SS_tot)",
             "k_shape_scores": atlas.options["n_regression_scores"],
-            "loo_r2": {f: [None if not np.isfinite(v) else float(v) for v in r["r2"]]
-                       for f, r in atlas.regression.items()},
+            "loo_r2": {
+                f: [None if not np.isfinite(v) else float(v) for v in r["r2"]] for f, r in atlas.regression.items()
+            },
         },
     }

@@ -7,6 +7,7 @@
 
 Pure numpy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -212,8 +213,9 @@ class PCA:
         }
 
 
-def mode_deformation(pca: PCA, template: VesselModel, mode: int, *, n_sigma: float = 2.0, n_tau: int = 101,
-                     n_theta: int = 48) -> dict[str, Any]:
+def mode_deformation(
+    pca: PCA, template: VesselModel, mode: int, *, n_sigma: float = 2.0, n_tau: int = 101, n_theta: int = 48
+) -> dict[str, Any]:
     """Split a shape mode into centerline displacement and radius change (paper Fig. 7).
 
     Compares the shapes mean + n_sigma sigma_m u_m and the mean (feature vectors rebuilt with
@@ -248,9 +250,17 @@ def mode_deformation(pca: PCA, template: VesselModel, mode: int, *, n_sigma: flo
     theta = TWO_PI * np.arange(n_theta) / n_theta
     T, TH = np.meshgrid(tau, theta, indexing="ij")
     dc = np.linalg.norm(m1.vcs.curve(tau) - m0.vcs.curve(tau), axis=1)
-    dr = m1.wall(T, TH) - m0.wall(T, TH)
-    return {"tau": tau, "theta": theta, "centerline_displacement": dc, "radius_change": dr,
-            "mean_model": m0, "mode_model": m1, "mode": int(mode), "n_sigma": float(n_sigma)}
+    dr = m1.fitted_wall()(T, TH) - m0.fitted_wall()(T, TH)
+    return {
+        "tau": tau,
+        "theta": theta,
+        "centerline_displacement": dc,
+        "radius_change": dr,
+        "mean_model": m0,
+        "mode_model": m1,
+        "mode": int(mode),
+        "n_sigma": float(n_sigma),
+    }
 
 
 def flow_vector(fields: Mapping[str, ArrayLike], name: str, *, frame: str = "vcs") -> NDArray[np.float64]:
@@ -282,12 +292,15 @@ def flow_vector(fields: Mapping[str, ArrayLike], name: str, *, frame: str = "vcs
     """
     key = f"{name}_vcs" if frame == "vcs" and name in ("U", "WSS") else name
     if key not in fields:
-        raise VCSInputError(f"the resampled fields have no '{key}'; resample the case with vcs.cfd.resample.sample_case")
+        raise VCSInputError(
+            f"the resampled fields have no '{key}'; resample the case with vcs.cfd.resample.sample_case"
+        )
     return np.asarray(fields[key], float).ravel()
 
 
-def top_variation_mask(pca: PCA, mode: int, field_shape: tuple[int, ...], *, vector: bool,
-                       fraction: float = 0.2) -> NDArray[np.bool_]:
+def top_variation_mask(
+    pca: PCA, mode: int, field_shape: tuple[int, ...], *, vector: bool, fraction: float = 0.2
+) -> NDArray[np.bool_]:
     """Grid cells in the top ``fraction`` of a flow mode's variation sigma_m |u_m|.
 
     Parameters

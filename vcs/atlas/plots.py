@@ -19,6 +19,7 @@ Files written by :func:`write_atlas_figures` into ``out_dir`` (all in mm, atlas 
 * ``flow_{field}_mode{k}.png``: theta-clipped lumen views (paper Figs. 8-9): mean - 2 sigma, mean,
   mean + 2 sigma, and the top-20 % region.
 """
+
 from __future__ import annotations
 
 import logging
@@ -42,7 +43,8 @@ PathLike = str | Path
 log = logging.getLogger(__name__)
 
 
-def _plt():
+def _plt() -> Any:
+    """matplotlib.pyplot with the off-screen Agg backend."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -54,8 +56,9 @@ def _plt():
 # ---------------------------------------------------------------------------------------------
 # Shapes
 # ---------------------------------------------------------------------------------------------
-def shape_polydata(model: VesselModel, *, n_tau: int = 101, n_theta: int = 48,
-                   point_arrays: dict[str, np.ndarray] | None = None) -> pyvista.PolyData:
+def shape_polydata(
+    model: VesselModel, *, n_tau: int = 101, n_theta: int = 48, point_arrays: dict[str, np.ndarray] | None = None
+) -> pyvista.PolyData:
     """Wall surface (Eq. 8 on a (tau, theta) grid, seam closed) plus the centerline as one PolyData.
 
     Parameters
@@ -86,8 +89,9 @@ def shape_polydata(model: VesselModel, *, n_tau: int = 101, n_theta: int = 48,
     return wall.append_polydata(line)
 
 
-def write_shape_files(pca: PCA, template: VesselModel, out_dir: PathLike, *, n_modes: int | None = None,
-                      n_sigma: float = 2.0) -> dict[str, str]:
+def write_shape_files(
+    pca: PCA, template: VesselModel, out_dir: PathLike, *, n_modes: int | None = None, n_sigma: float = 2.0
+) -> dict[str, str]:
     """Mean shape and mean +- n_sigma shapes (VTP) and the Fig. 7 deformation PNG per mode.
 
     Parameters
@@ -123,22 +127,31 @@ def write_shape_files(pca: PCA, template: VesselModel, out_dir: PathLike, *, n_m
             d = mode_deformation(pca, template, k, n_sigma=sign * n_sigma)
             T, TH = np.meshgrid(d["tau"], d["theta"], indexing="ij")
             disp = np.linalg.norm(d["mode_model"].surface_points(T, TH) - mean.surface_points(T, TH), axis=-1)
-            arrays = {"centerline_displacement": np.repeat(d["centerline_displacement"][:, None], len(d["theta"]), 1),
-                      "radius_change": d["radius_change"], "displacement": disp}
+            arrays = {
+                "centerline_displacement": np.repeat(d["centerline_displacement"][:, None], len(d["theta"]), 1),
+                "radius_change": d["radius_change"],
+                "displacement": disp,
+            }
             name = f"shape_mode{k + 1}_{tag}{n_sigma:g}sigma.vtp"
-            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]),
-                           point_arrays=arrays).save(str(out / name))
+            shape_polydata(d["mode_model"], n_tau=len(d["tau"]), n_theta=len(d["theta"]), point_arrays=arrays).save(
+                str(out / name)
+            )
             files[f"shape_mode{k + 1}_{tag}"] = name
             if sign > 0:
                 png = f"shape_mode{k + 1}_deformation.png"
-                deformation_png(d, out / png, title=f"shape mode {k + 1} (+{n_sigma:g} sigma, "
-                                                    f"{100 * pca.explained_variance_ratio[k]:.1f}% variance)")
+                deformation_png(
+                    d,
+                    out / png,
+                    title=f"shape mode {k + 1} (+{n_sigma:g} sigma, "
+                    f"{100 * pca.explained_variance_ratio[k]:.1f}% variance)",
+                )
                 files[f"shape_mode{k + 1}_deformation"] = png
     return files
 
 
-def mean_shape_png(mean: VesselModel, path: PathLike, *,
-                   root_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)) -> None:
+def mean_shape_png(
+    mean: VesselModel, path: PathLike, *, root_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)
+) -> None:
     """PNG of the mean shape's wall radius: a map and cross-sections near the root.
 
     The wall radius rho_w(tau, theta) (mm) as a map over (tau, theta), and the cross-sections at
@@ -156,7 +169,8 @@ def mean_shape_png(mean: VesselModel, path: PathLike, *,
     plt = _plt()
     th = np.linspace(0.0, TWO_PI, 181)
     tau = np.linspace(0.0, 1.0, 201)
-    R = mean.wall(tau[:, None], th[None, :])
+    wall = mean.fitted_wall()
+    R = wall(tau[:, None], th[None, :])
     fig = plt.figure(figsize=(10, 3.8), dpi=110)
     ax = fig.add_subplot(1, 2, 1)
     im = ax.imshow(R.T, origin="lower", aspect="auto", extent=(0, 1, 0, TWO_PI), cmap="viridis")
@@ -165,7 +179,7 @@ def mean_shape_png(mean: VesselModel, path: PathLike, *,
     ax.set_title("mean shape: wall radius rho_w (mm)")
     fig.colorbar(im, ax=ax)
     axp = fig.add_subplot(1, 2, 2, projection="polar")
-    radii = [mean.wall(np.full_like(th, t), th) for t in root_taus]
+    radii = [wall(np.full_like(th, t), th) for t in root_taus]
     for t, r in zip(root_taus, radii):
         axp.plot(th, r, label=f"tau = {t:g}")
     axp.set_rmin(0.8 * min(r.min() for r in radii))  # an offset radial axis shows the lobes
@@ -194,8 +208,15 @@ def deformation_png(d: dict[str, Any], path: PathLike, *, title: str = "") -> No
     a0.set_ylabel("|delta c(tau)| (mm)")
     a0.set_title(title or f"mode {d['mode'] + 1}")
     lim = max(float(np.abs(d["radius_change"]).max()), 1e-12)
-    im = a1.imshow(d["radius_change"].T, origin="lower", aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim,
-                   extent=(0, 1, 0, TWO_PI))
+    im = a1.imshow(
+        d["radius_change"].T,
+        origin="lower",
+        aspect="auto",
+        cmap="RdBu_r",
+        vmin=-lim,
+        vmax=lim,
+        extent=(0, 1, 0, TWO_PI),
+    )
     a1.set_xlabel("tau")
     a1.set_ylabel("theta (rad)")
     fig.colorbar(im, ax=[a0, a1], label="delta rho_w (mm)", shrink=0.6)
@@ -214,8 +235,10 @@ def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
     """
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=110)
-    series = {"shape": atlas.shape.explained_variance_ratio,
-              **{f: p.explained_variance_ratio for f, p in atlas.flow.items()}}
+    series = {
+        "shape": atlas.shape.explained_variance_ratio,
+        **{f: p.explained_variance_ratio for f, p in atlas.flow.items()},
+    }
     w = 0.8 / len(series)
     for i, (name, v) in enumerate(series.items()):
         ax.bar(np.arange(1, len(v) + 1) + (i - (len(series) - 1) / 2) * w, 100 * v, w, label=name)
@@ -274,7 +297,7 @@ def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.Unstructur
         shape = atlas.field_shapes[f]
         ff = atlas.options["flow_frame"]
 
-        def vol(a):
+        def vol(a: np.ndarray) -> np.ndarray:
             if a.shape[:3] != pts.shape[:3]:  # wall field (n_tau, n_theta[, 3]) -> rho_n = 1 layer
                 full = np.zeros((*a.shape[:2], n_rho, *a.shape[2:]))
                 full[:, :, -1] = a
@@ -283,7 +306,8 @@ def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.Unstructur
 
         mean = vol(_field_cartesian(pca.mean, f, shape, frame, ff))
         arrays[f"{f}_mean"] = mean
-        panels[f] = {"mean": mean, "modes": []}
+        modes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        panels[f] = {"mean": mean, "modes": modes}
         for k in range(pca.n_modes):
             plus = vol(_field_cartesian(pca.mode_sample(k, 2.0), f, shape, frame, ff))
             minus = vol(_field_cartesian(pca.mode_sample(k, -2.0), f, shape, frame, ff))
@@ -295,7 +319,7 @@ def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.Unstructur
             arrays[f"{f}_mode{k + 1}_plus2sigma"] = plus
             arrays[f"{f}_mode{k + 1}_minus2sigma"] = minus
             arrays[f"{f}_mode{k + 1}_top20"] = mask.astype(np.uint8)
-            panels[f]["modes"].append((minus, plus, mask))
+            modes.append((minus, plus, mask))
     arrays["rho_n"] = np.broadcast_to(rho_n, pts.shape[:3])
     return grid_to_vtk(pts, arrays), {"points": pts, "panels": panels}
 
@@ -305,8 +329,15 @@ def _half(a: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return a[:, keep]
 
 
-def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list[tuple[str, np.ndarray, str]],
-                     path: PathLike, *, label: str, view_normal: np.ndarray | None = None) -> str:
+def clipped_view_png(
+    points: np.ndarray,
+    theta: np.ndarray,
+    panels: list[tuple[str, np.ndarray, str]],
+    path: PathLike,
+    *,
+    label: str,
+    view_normal: np.ndarray | None = None,
+) -> str:
     """PNG of theta-clipped lumen views (paper Figs. 8-9), one view per panel.
 
     Shows the half theta in [0, pi] of each panel's grid, so the cut planes theta = 0 and
@@ -337,7 +368,7 @@ def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list[tuple[s
         import pyvista as pv
 
         pv.OFF_SCREEN = True
-        pl = pv.Plotter(off_screen=True, shape=(1, len(panels)), window_size=(420 * len(panels), 520))
+        pl = pv.Plotter(off_screen=True, shape=(1, len(panels)), window_size=[420 * len(panels), 520])
         centre = points.reshape(-1, 3).mean(axis=0)
         if view_normal is None:
             view_normal = np.array([0.0, 0.0, 1.0])
@@ -347,12 +378,20 @@ def clipped_view_png(points: np.ndarray, theta: np.ndarray, panels: list[tuple[s
             pl.subplot(0, i)
             g = grid_to_vtk(pts, {label: _half(values, theta)}, close_theta=False)
             surf = g.extract_surface(algorithm="dataset_surface")
-            pl.add_mesh(surf, scalars=label, cmap=cmap, show_scalar_bar=True,
-                        clim=clim if cmap == panels[0][2] else None,
-                        scalar_bar_args={"title": f"{label} {i}", "vertical": False})
+            pl.add_mesh(
+                surf,
+                scalars=label,
+                cmap=cmap,  # type: ignore[arg-type]  # any matplotlib colour-map name
+                show_scalar_bar=True,
+                clim=clim if cmap == panels[0][2] else None,
+                scalar_bar_args={"title": f"{label} {i}", "vertical": False},
+            )
             pl.add_text(title, font_size=9)
-            pl.camera_position = [tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
-                                  tuple(centre), (0.0, 0.0, 1.0) if abs(view_normal[2]) < 0.9 else (0.0, 1.0, 0.0)]
+            pl.camera_position = [
+                tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
+                tuple(centre),
+                (0.0, 0.0, 1.0) if abs(view_normal[2]) < 0.9 else (0.0, 1.0, 0.0),
+            ]
         pl.screenshot(str(path))
         pl.close()
         return "pyvista"
@@ -405,10 +444,12 @@ def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -
         cmap = "coolwarm" if f == "p" else "viridis"
         label = {"U": "|U| (m/s)", "p": "p (Pa)", "WSS": "|WSS| (Pa)"}.get(f, f)
         for k, (minus, plus, mask) in enumerate(d["modes"]):
-            panels = [(f"{f} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
-                      (f"{f} mean", _scalar(d["mean"]), cmap),
-                      (f"{f} mean + 2 sigma (mode {k + 1})", _scalar(plus), cmap),
-                      (f"{f} mode {k + 1}: top 20% variation", mask.astype(float), "Reds")]
+            panels = [
+                (f"{f} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
+                (f"{f} mean", _scalar(d["mean"]), cmap),
+                (f"{f} mean + 2 sigma (mode {k + 1})", _scalar(plus), cmap),
+                (f"{f} mode {k + 1}: top 20% variation", mask.astype(float), "Reds"),
+            ]
             name = f"flow_{f}_mode{k + 1}.png"
             renderers.add(clipped_view_png(info["points"], theta, panels, out / name, label=label, view_normal=view))
             files[f"flow_{f}_mode{k + 1}"] = name

@@ -9,6 +9,7 @@ similarity transform is used).
 
 Pure numpy/scipy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -124,8 +125,9 @@ def wall_grid_points(model: VesselModel, n_tau: int = 40, n_theta: int = 24) -> 
     return model.surface_points(tau, theta).reshape(-1, 3)
 
 
-def procrustes(source: ArrayLike, target: ArrayLike, *, scale: bool = False,
-               weights: ArrayLike | None = None) -> RigidTransform:
+def procrustes(
+    source: ArrayLike, target: ArrayLike, *, scale: bool = False, weights: ArrayLike | None = None
+) -> RigidTransform:
     """Least-squares transform T minimising sum_i w_i |T(source_i) - target_i|^2 (Kabsch / Umeyama).
 
     Parameters
@@ -165,7 +167,11 @@ def procrustes(source: ArrayLike, target: ArrayLike, *, scale: bool = False,
 
 
 def generalized_procrustes(
-    point_sets: Sequence[ArrayLike], *, scale: bool = False, reference: int = 0, max_iter: int = 100,
+    point_sets: Sequence[ArrayLike],
+    *,
+    scale: bool = False,
+    reference: int = 0,
+    max_iter: int = 100,
     tol: float = 1e-10,
 ) -> tuple[list[RigidTransform], np.ndarray, dict[str, Any]]:
     """Generalised Procrustes analysis of corresponding point sets (paper Section 2.3.2).
@@ -209,7 +215,7 @@ def generalized_procrustes(
     mean = ref.copy()
     size = np.sqrt(np.mean(np.sum((ref - ref.mean(0)) ** 2, axis=1)))
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (`it` is reported after the loop)
         transforms = [procrustes(p, mean, scale=scale) for p in sets]
         new = np.mean([t(p) for t, p in zip(transforms, sets)], axis=0)
         new = procrustes(new, ref, scale=scale)(new)
@@ -219,8 +225,11 @@ def generalized_procrustes(
             break
     transforms = [procrustes(p, mean, scale=scale) for p in sets]
     rms = [float(np.sqrt(np.mean(np.sum((t(p) - mean) ** 2, axis=1)))) for t, p in zip(transforms, sets)]
-    return transforms, mean, {"iterations": it, "scale": bool(scale), "reference": int(reference),
-                              "rms_to_mean_mm": rms}
+    return (
+        transforms,
+        mean,
+        {"iterations": it, "scale": bool(scale), "reference": int(reference), "rms_to_mean_mm": rms},
+    )
 
 
 def transform_model(model: VesselModel, transform: RigidTransform) -> VesselModel:
@@ -246,8 +255,9 @@ def transform_model(model: VesselModel, transform: RigidTransform) -> VesselMode
 
     v = model.vcs
     curve = BSpline(v.curve.t, transform(v.control_points), v.curve.k)
-    vcs = VesselCoordinateSystem(curve, transform.rotation @ v.v1_0,
-                                 v1_0_from=f"{v.v1_0_from}; rotated by the alignment")
+    vcs = VesselCoordinateSystem(
+        curve, transform.rotation @ v.v1_0, v1_0_from=f"{v.v1_0_from}; rotated by the alignment"
+    )
     wall = model.wall
     if wall is not None and transform.scale != 1.0:
         wall = wall.with_coefficients(wall.coefficients * transform.scale)
@@ -281,8 +291,9 @@ def check_compatible(models: Sequence[VesselModel]) -> None:
             )
 
 
-def align_models(models: Sequence[VesselModel], *, n_tau: int = 40, n_theta: int = 24, scale: bool = False,
-                 reference: int = 0) -> tuple[list[VesselModel], list[RigidTransform], dict[str, Any]]:
+def align_models(
+    models: Sequence[VesselModel], *, n_tau: int = 40, n_theta: int = 24, scale: bool = False, reference: int = 0
+) -> tuple[list[VesselModel], list[RigidTransform], dict[str, Any]]:
     """Coregister vessel models by GPA on their Eq. 8 wall grids (paper Section 2.3.2).
 
     Parameters

@@ -2,9 +2,10 @@
 
 Pure numpy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
+
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -13,14 +14,14 @@ from numpy.typing import ArrayLike
 from vcs.errors import VCSInputError
 
 
-def _safe_std(X):
+def _safe_std(X: np.ndarray) -> np.ndarray:
     """Column standard deviations; columns that are constant (to round-off, e.g. the scores of a
     mode with no variance among the training samples) get inf, i.e. a standardised value of 0."""
     sx = X.std(0)
     return np.where(sx > 1e-9 * max(float(sx.max(initial=0.0)), 1e-300), sx, np.inf)
 
 
-def _ridge_solve(X, Y, alpha) -> Callable[[ArrayLike], np.ndarray]:
+def _ridge_solve(X: np.ndarray, Y: np.ndarray, alpha: float) -> Callable[[ArrayLike], np.ndarray]:
     """Ridge with unpenalised intercept on standardised X. Returns a predict function."""
     mx, sx = X.mean(0), _safe_std(X)
     my = Y.mean(0)
@@ -29,7 +30,7 @@ def _ridge_solve(X, Y, alpha) -> Callable[[ArrayLike], np.ndarray]:
     return lambda Xn: ((np.asarray(Xn) - mx) / sx) @ B + my
 
 
-def _gcv_alpha(X, Y, alphas):
+def _gcv_alpha(X: np.ndarray, Y: np.ndarray, alphas: np.ndarray | Sequence[float]) -> float:
     """alpha minimising the exact leave-one-out error of the ridge fit (hat-matrix shortcut)."""
     Z = (X - X.mean(0)) / _safe_std(X)
     Yc = Y - Y.mean(0)
@@ -97,5 +98,9 @@ def ridge_loo(X: ArrayLike, Y: ArrayLike, *, alphas: ArrayLike = DEFAULT_ALPHAS)
     ss = np.sum((Y - Y.mean(0)) ** 2, axis=0)
     # columns without variance (a PCA mode of round-off size) have no R^2: nan (null in atlas.json)
     r2 = 1.0 - np.sum((Y - pred) ** 2, axis=0) / np.where(ss > 1e-12 * max(float(ss.max()), 1e-300), ss, np.nan)
-    return {"r2": r2[0] if squeeze else r2, "predictions": pred[:, 0] if squeeze else pred,
-            "alphas": chosen, "alpha_full": float(_gcv_alpha(X, Y, alphas))}
+    return {
+        "r2": r2[0] if squeeze else r2,
+        "predictions": pred[:, 0] if squeeze else pred,
+        "alphas": chosen,
+        "alpha_full": float(_gcv_alpha(X, Y, alphas)),
+    }

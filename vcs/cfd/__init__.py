@@ -15,6 +15,7 @@ Modules: :mod:`vcs.cfd.openfoam` (defaults, flavour table, detection, templates)
 :mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
 """
+
 from vcs.cfd.case import render_case
 from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, detect_openfoam
 from vcs.cfd.resample import load_fields, read_case, sample_case, write_fields

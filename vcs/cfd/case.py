@@ -1,6 +1,7 @@
 """Rendering an OpenFOAM case (paper Section 2.4.1) from the wall STL and the CFD parameters:
 background box, a point inside the lumen, patches from the STL solids, the jinja2 templates of
 the flavour, and the inlet velocity profile on the meshed inlet faces."""
+
 from __future__ import annotations
 
 import json
@@ -11,8 +12,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, deep_merge, detect_openfoam, template_dir
 from vcs.cfd.foamfiles import patch_geometry
+from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, deep_merge, detect_openfoam, template_dir
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 from vcs.mesh import points_inside, read_stl_solids, triangle_cross
 
@@ -28,12 +29,17 @@ CASE_JSON = "vcsflow_case.json"
 def _jinja_env(flavour: str) -> jinja2.Environment:
     """jinja2 environment of a flavour: its override templates first, then ``common/``."""
     import jinja2
+
     return jinja2.Environment(
-        loader=jinja2.ChoiceLoader([
-            jinja2.FileSystemLoader(str(template_dir() / flavour)),
-            jinja2.FileSystemLoader(str(template_dir() / "common")),
-        ]),
-        undefined=jinja2.StrictUndefined, keep_trailing_newline=True, autoescape=False,
+        loader=jinja2.ChoiceLoader(
+            [
+                jinja2.FileSystemLoader(str(template_dir() / flavour)),
+                jinja2.FileSystemLoader(str(template_dir() / "common")),
+            ]
+        ),
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+        autoescape=False,
     )
 
 
@@ -80,7 +86,7 @@ def _inside_point(solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floa
     seeds.append(alltris.reshape(-1, 3).mean(0))
     frac = np.array([0.371, 0.413, 0.437])
     for p in seeds:
-        q = bmin + (np.floor((p - bmin) / h) + frac) * h   # keep it off background-mesh faces
+        q = bmin + (np.floor((p - bmin) / h) + frac) * h  # keep it off background-mesh faces
         if points_inside(q[None], alltris)[0]:
             return [float(x) for x in q]
     raise VCSInputError("could not find a point inside the vessel surface; set mesh.inside_point")
@@ -90,15 +96,27 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
     """Template variables of a case state; ``extra`` overrides them."""
     cfd = state["cfd"]
     ctx = {
-        "flavour": state["flavour"], "flav": FLAVOURS[state["flavour"]],
-        "mesh": cfd["mesh"], "physics": cfd["physics"], "inlet": cfd["inlet"], "solver": cfd["solver"],
-        "io": cfd["io"], "ranks": max(int(cfd["ranks"]), 1),
+        "flavour": state["flavour"],
+        "flav": FLAVOURS[state["flavour"]],
+        "mesh": cfd["mesh"],
+        "physics": cfd["physics"],
+        "inlet": cfd["inlet"],
+        "solver": cfd["solver"],
+        "io": cfd["io"],
+        "ranks": max(int(cfd["ranks"]), 1),
         "decomposition": {"method": cfd["decomposition"]["method"], "n": state["decomposition_n"]},
-        "bmin": state["bmin"], "bmax": state["bmax"], "ncells": state["ncells"],
-        "inside_point": state["inside_point"], "stl_name": STL_NAME,
-        "solids": state["solids"], "patches": state["patches"],
-        "end_time": cfd["solver"]["max_iterations"], "div_scheme": cfd["solver"]["div_scheme"],
-        "residual_control": True, "average": False, "inlet_values": None,
+        "bmin": state["bmin"],
+        "bmax": state["bmax"],
+        "ncells": state["ncells"],
+        "inside_point": state["inside_point"],
+        "stl_name": STL_NAME,
+        "solids": state["solids"],
+        "patches": state["patches"],
+        "end_time": cfd["solver"]["max_iterations"],
+        "div_scheme": cfd["solver"]["div_scheme"],
+        "residual_control": True,
+        "average": False,
+        "inlet_values": None,
     }
     ctx.update(extra)
     return ctx
@@ -133,8 +151,9 @@ def _flow_rate(inlet: dict[str, Any]) -> float:
     return float(inlet["velocity"]) * float(inlet["valve_area"])
 
 
-def render_case(case_dir: Path | str, stl_path: Path | str, cfd: dict[str, Any] | None = None, *,
-                flavour: str | None = None) -> dict[str, Any]:
+def render_case(
+    case_dir: Path | str, stl_path: Path | str, cfd: dict[str, Any] | None = None, *, flavour: str | None = None
+) -> dict[str, Any]:
     """Write a complete OpenFOAM case for a multi-solid ASCII STL (paper Section 2.4.1).
 
     ``cfd`` is merged over ``DEFAULTS``. The flavour is ``flavour`` or ``cfd['flavour']`` or the
@@ -194,13 +213,30 @@ def render_case(case_dir: Path | str, stl_path: Path | str, cfd: dict[str, Any] 
     n = [1, 1, 1]
     n[int(np.argmax(hi - lo))] = ranks
 
-    level = {"wall": m["wall_level"], "inlet": m["inlet_level"], "outlet": m["outlet_level"], "other": m["surface_level"]}
+    level = {
+        "wall": m["wall_level"],
+        "inlet": m["inlet_level"],
+        "outlet": m["outlet_level"],
+        "other": m["surface_level"],
+    }
     state = {
-        "flavour": flavour, "cfd": cfd, "stl_source": str(Path(stl_path).resolve()),
-        "bmin": [float(x) for x in bmin], "bmax": [float(x) for x in bmax], "ncells": [int(x) for x in ncells],
-        "inside_point": [float(x) for x in inside], "decomposition_n": n,
-        "solids": [{"name": k, "role": roles[k], "patch_type": "wall" if roles[k] == "wall" else "patch",
-                    "level": level[roles[k]]} for k in solids],
+        "flavour": flavour,
+        "cfd": cfd,
+        "stl_source": str(Path(stl_path).resolve()),
+        "bmin": [float(x) for x in bmin],
+        "bmax": [float(x) for x in bmax],
+        "ncells": [int(x) for x in ncells],
+        "inside_point": [float(x) for x in inside],
+        "decomposition_n": n,
+        "solids": [
+            {
+                "name": k,
+                "role": roles[k],
+                "patch_type": "wall" if roles[k] == "wall" else "patch",
+                "level": level[roles[k]],
+            }
+            for k in solids
+        ],
         "patches": [{"name": k, "role": roles[k]} for k in solids] + [{"name": "background", "role": "other"}],
         "flow_rate": _flow_rate(cfd["inlet"]),
         "stl_bounds": [[float(x) for x in lo], [float(x) for x in hi]],
@@ -250,7 +286,7 @@ def inlet_profile(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
     centres, sf = patch_geometry(case_dir, name)
     mag = np.linalg.norm(sf, axis=1)
     ntot = sf.sum(0)
-    n_in = -ntot / np.linalg.norm(ntot)              # Sf points out of the domain
+    n_in = -ntot / np.linalg.norm(ntot)  # Sf points out of the domain
     area = float(mag.sum())
     c0 = np.asarray(inlet.get("centre") or (centres * mag[:, None]).sum(0) / area, float)
     d = centres - c0
@@ -268,13 +304,21 @@ def inlet_profile(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
     else:  # parabolic over the equivalent-circle radius of the inlet
         r_eq = np.sqrt(area / np.pi)
         shape = np.clip(1.0 - (r / r_eq) ** 2, 0.0, None)
-    inflow_per_unit = float((shape * (sf @ (-n_in))).sum())   # sum shape * (n_in . -Sf)
+    inflow_per_unit = float((shape * (sf @ (-n_in))).sum())  # sum shape * (n_in . -Sf)
     scale = q / inflow_per_unit
     values = scale * shape[:, None] * n_in[None, :]
     flux = float(-(values * sf).sum())
     covered = float(mag[shape > 0].sum())
-    return {"patch": name, "values": values, "n_faces": int(len(mag)), "patch_area": area,
-            "direction": [float(x) for x in n_in], "centre": [float(x) for x in c0],
-            "flow_rate_target": q, "flow_rate_discrete": flux,
-            "flux_error_rel": abs(flux - q) / q, "covered_area": covered,
-            "peak_velocity": float(np.abs(values @ n_in).max())}
+    return {
+        "patch": name,
+        "values": values,
+        "n_faces": int(len(mag)),
+        "patch_area": area,
+        "direction": [float(x) for x in n_in],
+        "centre": [float(x) for x in c0],
+        "flow_rate_target": q,
+        "flow_rate_discrete": flux,
+        "flux_error_rel": abs(flux - q) / q,
+        "covered_area": covered,
+        "peak_velocity": float(np.abs(values @ n_in).max()),
+    }

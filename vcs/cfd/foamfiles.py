@@ -4,6 +4,7 @@
 * solver-log parser (initial residuals, continuity errors, convergence message)
 * ``postProcessing/*/*.dat`` reader (surfaceFieldValue output)
 """
+
 from __future__ import annotations
 
 import re
@@ -59,8 +60,11 @@ def read_boundary(polymesh: Path | str) -> dict[str, dict[str, Any]]:
         body = m.group(2)
         d = dict(re.findall(r"(\w+)\s+([^;]+);", body))
         if "nFaces" in d:
-            out[m.group(1)] = {"type": d.get("type", "patch").strip(),
-                               "nFaces": int(d["nFaces"]), "startFace": int(d["startFace"])}
+            out[m.group(1)] = {
+                "type": d.get("type", "patch").strip(),
+                "nFaces": int(d["nFaces"]),
+                "startFace": int(d["startFace"]),
+            }
     return out
 
 
@@ -69,7 +73,7 @@ def _list_body(txt: str) -> tuple[int, str]:
     m = re.search(r"(\d+)\s*\(", txt)
     if m is None:
         raise VCSInputError("no OpenFOAM list found")
-    return int(m.group(1)), txt[m.end():]
+    return int(m.group(1)), txt[m.end() :]
 
 
 def read_points(polymesh: Path | str) -> NDArray[np.floating]:
@@ -120,11 +124,12 @@ def read_faces(polymesh: Path | str, start: int, count: int) -> list[NDArray[np.
     txt = _read_text(Path(polymesh) / "faces")
     n, body = _list_body(txt)
     faces = re.findall(r"\d+\s*\(([\d\s]+)\)", body)
-    return [np.array(f.split(), dtype=int) for f in faces[start:start + count]]
+    return [np.array(f.split(), dtype=int) for f in faces[start : start + count]]
 
 
-def face_geometry(points: NDArray[np.floating],
-                  faces: list[NDArray[np.integer]]) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+def face_geometry(
+    points: NDArray[np.floating], faces: list[NDArray[np.integer]]
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
     """Face centres and area vectors, OpenFOAM style (triangle fan about the point average).
 
     Parameters
@@ -194,10 +199,16 @@ def patch_geometry(case_dir: Path | str, patch: str) -> tuple[NDArray[np.floatin
 
 # ----------------------------------------------------------------------- logs
 
-_RES_RE = re.compile(r"Solving for (\w+), Initial residual = ([-+0-9.eE]+), Final residual = ([-+0-9.eE]+), No Iterations (\d+)")
+_RES_RE = re.compile(
+    r"Solving for (\w+), Initial residual = ([-+0-9.eE]+), Final residual = ([-+0-9.eE]+), No Iterations (\d+)"
+)
 _TIME_RE = re.compile(r"^Time = ([-+0-9.eE]+)\s*$")
-_CONT_RE = re.compile(r"time step continuity errors : sum local = ([-+0-9.eE]+), global = ([-+0-9.eE]+), cumulative = ([-+0-9.eE]+)")
-_CONV_RE = re.compile(r"(SIMPLE solution converged in|reached convergence criteria|solution converged in)\D*(\d+)?", re.I)
+_CONT_RE = re.compile(
+    r"time step continuity errors : sum local = ([-+0-9.eE]+), global = ([-+0-9.eE]+), cumulative = ([-+0-9.eE]+)"
+)
+_CONV_RE = re.compile(
+    r"(SIMPLE solution converged in|reached convergence criteria|solution converged in)\D*(\d+)?", re.I
+)
 
 
 def parse_solver_log(path: str | Path) -> dict[str, Any]:
@@ -223,7 +234,7 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
     rows: list[dict[str, Any]] = []
     cur: dict[str, Any] | None = None
     converged_msg = False
-    with open(path, "r", errors="replace") as fh:
+    with open(path, errors="replace") as fh:
         for line in fh:
             line = line.rstrip("\n")
             m = _TIME_RE.match(line.strip())

@@ -6,6 +6,7 @@ dictionaries checked against the OpenFOAM-10 sources). Both are rendered from
 ``templates/openfoam/common`` plus the flavour's override directory, driven by the single table
 ``FLAVOURS`` below; nothing else in the package depends on the flavour.
 """
+
 from __future__ import annotations
 
 import copy
@@ -21,70 +22,76 @@ from typing import Any
 # --------------------------------------------------------------------------- parameters
 
 DEFAULTS: dict[str, Any] = {
-    "flavour": None,          # None = detect the installed OpenFOAM; "esi" (v1912/openfoam.com) or "org10"
-    "ranks": 1,               # MPI ranks for simpleFoam (1 = serial); decomposition below
+    "flavour": None,  # None = detect the installed OpenFOAM; "esi" (v1912/openfoam.com) or "org10"
+    "ranks": 1,  # MPI ranks for simpleFoam (1 = serial); decomposition below
     "mesh": {
-        "cell_size": 1.0e-3,          # background (blockMesh) hex edge [m]
-        "pad_cells": 3,               # background box = STL bounds + pad_cells cells on every side
-        "surface_level": [0, 0],      # snappy (min max) refinement level on the whole vessel surface
-        "wall_level": [0, 0],         # ... on the wall solid
-        "inlet_level": [0, 0],        # ... on the inlet solid (raise to resolve the jet's shear layer)
-        "outlet_level": [0, 0],       # ... on the outlet solid(s)
+        "cell_size": 1.0e-3,  # background (blockMesh) hex edge [m]
+        "pad_cells": 3,  # background box = STL bounds + pad_cells cells on every side
+        "surface_level": [0, 0],  # snappy (min max) refinement level on the whole vessel surface
+        "wall_level": [0, 0],  # ... on the wall solid
+        "inlet_level": [0, 0],  # ... on the inlet solid (raise to resolve the jet's shear layer)
+        "outlet_level": [0, 0],  # ... on the outlet solid(s)
         "n_cells_between_levels": 2,
         "resolve_feature_angle": 30,
         "snap_solve_iterations": 50,
-        "layers": 0,                  # wall prism layers (0 = addLayers off)
+        "layers": 0,  # wall prism layers (0 = addLayers off)
         "layer_expansion": 1.2,
         "final_layer_thickness": 0.3,
         "min_layer_thickness": 0.1,
         "max_non_ortho": 65,
         "max_local_cells": 2_000_000,
         "max_global_cells": 20_000_000,
-        "inside_point": None,         # [x, y, z] inside the lumen; None = automatic (from the inlet)
+        "inside_point": None,  # [x, y, z] inside the lumen; None = automatic (from the inlet)
     },
     "physics": {
-        "nu": 3.37e-6,                # kinematic viscosity [m2/s] (Newtonian blood)
-        "rho": 1060.0,                # density [kg/m3], only to convert p and WSS to Pa
+        "nu": 3.37e-6,  # kinematic viscosity [m2/s] (Newtonian blood)
+        "rho": 1060.0,  # density [kg/m3], only to convert p and WSS to Pa
     },
     "inlet": {
-        "type": "jet",                # jet | uniform | parabolic
-        "velocity": 1.2,              # jet velocity [m/s] (paper: 1.2 m/s)
-        "valve_area": 1.0e-4,         # effective valve area [m2] (paper: 1 cm2) -> Q = velocity * area
-        "flow_rate": None,            # [m3/s]; overrides velocity * valve_area when set
-        "centre": None,               # jet centre [x, y, z]; None = area centroid of the inlet patch
+        "type": "jet",  # jet | uniform | parabolic
+        "velocity": 1.2,  # jet velocity [m/s] (paper: 1.2 m/s)
+        "valve_area": 1.0e-4,  # effective valve area [m2] (paper: 1 cm2) -> Q = velocity * area
+        "flow_rate": None,  # [m3/s]; overrides velocity * valve_area when set
+        "centre": None,  # jet centre [x, y, z]; None = area centroid of the inlet patch
     },
     "solver": {
-        "tolerance": 1.0e-5,          # SIMPLE residualControl (initial residuals of p and U)
-        "max_iterations": 2000,       # total SIMPLE iterations (start-up included)
-        "startup_iterations": 100,    # first-order start-up iterations (0 = none)
+        "tolerance": 1.0e-5,  # SIMPLE residualControl (initial residuals of p and U)
+        "max_iterations": 2000,  # total SIMPLE iterations (start-up included)
+        "startup_iterations": 100,  # first-order start-up iterations (0 = none)
         "startup_scheme": "upwind",
-        "div_scheme": "linearUpwind", # scheme of the main stage for div(phi,U)
-        "consistent": True,           # SIMPLEC
+        "div_scheme": "linearUpwind",  # scheme of the main stage for div(phi,U)
+        "consistent": True,  # SIMPLEC
         "relax_U": 0.9,
-        "relax_p": 1.0,               # with consistent=False use ~0.3 / relax_U ~0.7
+        "relax_p": 1.0,  # with consistent=False use ~0.3 / relax_U ~0.7
         "n_non_orthogonal_correctors": 1,
         "p_solver_tolerance": 1.0e-8,
         "p_rel_tol": 0.05,
         "U_solver_tolerance": 1.0e-9,
         "U_rel_tol": 0.1,
-        "fallback": "average",        # none | average: if not converged, continue average_iterations
-                                      # with fieldAverage and report the time-averaged (pseudo-steady) fields
+        "fallback": "average",  # none | average: if not converged, continue average_iterations
+        # with fieldAverage and report the time-averaged (pseudo-steady) fields
         "average_iterations": 500,
         "relaxed_tolerance": 1.0e-3,  # reported criterion for the fallback (converged stays false)
-        "timeout_s": None,            # wall-clock limit per utility call [s]
+        "timeout_s": None,  # wall-clock limit per utility call [s]
     },
     "decomposition": {
-        "method": "hierarchical",     # hierarchical | simple (scotch is a stub in Debian's package)
+        "method": "hierarchical",  # hierarchical | simple (scotch is a stub in Debian's package)
     },
     "io": {
-        "write_format": "ascii",      # ascii is required by the inlet-profile reader
+        "write_format": "ascii",  # ascii is required by the inlet-profile reader
     },
 }
 
 # ONE table for both flavours: names that differ, the geometry folder and the case files.
 _COMMON_FILES = [
-    "system/blockMeshDict", "system/snappyHexMeshDict", "system/controlDict", "system/fvSchemes",
-    "system/fvSolution", "system/decomposeParDict", "0/U", "0/p",
+    "system/blockMeshDict",
+    "system/snappyHexMeshDict",
+    "system/controlDict",
+    "system/fvSchemes",
+    "system/fvSolution",
+    "system/decomposeParDict",
+    "0/U",
+    "0/p",
 ]
 FLAVOURS: dict[str, dict[str, Any]] = {
     "esi": {
@@ -106,8 +113,6 @@ FLAVOURS: dict[str, dict[str, Any]] = {
         "files": _COMMON_FILES + ["constant/physicalProperties", "constant/momentumTransport"],
     },
 }
-
-
 
 
 def deep_merge(base: dict[str, Any], over: dict[str, Any] | None) -> dict[str, Any]:
@@ -193,8 +198,9 @@ def detect_openfoam() -> tuple[str | None, str | None]:
     banner = ""
     if shutil.which("simpleFoam"):
         try:
-            banner = subprocess.run(["simpleFoam", "-help"], env=foam_env(), capture_output=True,
-                                    text=True, timeout=60).stdout
+            banner = subprocess.run(
+                ["simpleFoam", "-help"], env=foam_env(), capture_output=True, text=True, timeout=60
+            ).stdout
         except (OSError, subprocess.SubprocessError):
             banner = ""
     if version is None:

@@ -23,6 +23,7 @@ compares across patients.
 
 The grid itself is :mod:`vcs.grid`; this module reads the case (pyvista's POpenFOAMReader).
 """
+
 from __future__ import annotations
 
 import json
@@ -36,7 +37,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from vcs.errors import VCSInputError
-from vcs.grid import GRID_DEFAULTS, grid_points, grid_to_vtk, local_frame, grid_axes, to_vcs_components
+from vcs.grid import GRID_DEFAULTS, grid_axes, grid_points, grid_to_vtk, local_frame, to_vcs_components
 
 if TYPE_CHECKING:
     import pyvista as pv
@@ -45,11 +46,13 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+
 # ---------------------------------------------------------------------------------------------
 # Reading a case
 # ---------------------------------------------------------------------------------------------
-def read_case(case_dir: Path | str, *, time: float | None = None,
-              wall_patch: str = "wall") -> tuple[pv.UnstructuredGrid, dict[str, pv.PolyData], float]:
+def read_case(
+    case_dir: Path | str, *, time: float | None = None, wall_patch: str = "wall"
+) -> tuple[pv.UnstructuredGrid, dict[str, pv.PolyData], float]:
     """Internal mesh and boundary patches of a reconstructed OpenFOAM case at the last (or given) time.
 
     Read with pyvista's POpenFOAMReader (a ``case.foam`` marker file is created when missing),
@@ -121,7 +124,8 @@ def read_case(case_dir: Path | str, *, time: float | None = None,
 # Sampling
 # ---------------------------------------------------------------------------------------------
 def _closest_on_surface(
-    surface: pv.PolyData, points: NDArray[np.floating],
+    surface: pv.PolyData,
+    points: NDArray[np.floating],
 ) -> tuple[NDArray[np.integer], NDArray[Any], NDArray[np.floating], NDArray[np.floating]]:
     """Closest cell and barycentric weights of the closest point on a triangulated surface.
 
@@ -153,8 +157,15 @@ def _closest_on_surface(
     return cell, tri, w, dist
 
 
-def mls_interpolate(points: np.ndarray, data_points: np.ndarray, values: np.ndarray, *, k: int = 27,
-                    quadratic_penalty: float = 1e-3, tree: cKDTree | None = None) -> np.ndarray:
+def mls_interpolate(
+    points: np.ndarray,
+    data_points: np.ndarray,
+    values: np.ndarray,
+    *,
+    k: int = 27,
+    quadratic_penalty: float = 1e-3,
+    tree: cKDTree | None = None,
+) -> np.ndarray:
     """Quadratic moving-least-squares interpolation of scattered values (cell centres, face centres).
 
     For each point: Gaussian-weighted least-squares fit of a quadratic in x (10 coefficients) to the
@@ -192,12 +203,15 @@ def mls_interpolate(points: np.ndarray, data_points: np.ndarray, values: np.ndar
     out = np.empty((len(points), V.shape[1]))
     penalty = np.diag([1e-9] + [1e-6] * 3 + [quadratic_penalty] * 6)
     for a in range(0, len(points), 20000):  # chunks bound the memory to ~100 MB
-        P = points[a:a + 20000]
+        P = points[a : a + 20000]
         d, j = tree.query(P, k=k, workers=-1)
         h = d[:, -1:] + 1e-300
         Y = (data_points[j] - P[:, None, :]) / h[..., None]
-        B = np.stack([np.ones(Y.shape[:2]), Y[..., 0], Y[..., 1], Y[..., 2]]
-                     + [Y[..., p] * Y[..., q] for p in range(3) for q in range(p, 3)], axis=-1)
+        B = np.stack(
+            [np.ones(Y.shape[:2]), Y[..., 0], Y[..., 1], Y[..., 2]]
+            + [Y[..., p] * Y[..., q] for p in range(3) for q in range(p, 3)],
+            axis=-1,
+        )
         w = np.exp(-2.0 * (d / h) ** 2)
         BtW = B.transpose(0, 2, 1) * w[:, None, :]
         A = BtW @ B
@@ -205,14 +219,24 @@ def mls_interpolate(points: np.ndarray, data_points: np.ndarray, values: np.ndar
         Vn = V[j]
         c = np.linalg.solve(A, BtW @ Vn)[:, 0]
         lo, hi = Vn.min(axis=1), Vn.max(axis=1)
-        out[a:a + 20000] = np.clip(c, lo - 0.5 * (hi - lo), hi + 0.5 * (hi - lo))
+        out[a : a + 20000] = np.clip(c, lo - 0.5 * (hi - lo), hi + 0.5 * (hi - lo))
     return out[:, 0] if squeeze else out
 
 
-def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: VesselModel, *,
-                n_tau: int = GRID_DEFAULTS["n_tau"], n_theta: int = GRID_DEFAULTS["n_theta"],
-                n_rho: int = GRID_DEFAULTS["n_rho"], rho_scale: float = 1e-3, rho_density: float = 1060.0,
-                method: str = "mls", wall_patch: str = "wall", wss_name: str = "wallShearStress") -> dict[str, Any]:
+def sample_mesh(
+    internal: pv.DataSet,
+    patches: dict[str, pv.PolyData],
+    model: VesselModel,
+    *,
+    n_tau: int = GRID_DEFAULTS["n_tau"],
+    n_theta: int = GRID_DEFAULTS["n_theta"],
+    n_rho: int = GRID_DEFAULTS["n_rho"],
+    rho_scale: float = 1e-3,
+    rho_density: float = 1060.0,
+    method: str = "mls",
+    wall_patch: str = "wall",
+    wss_name: str = "wallShearStress",
+) -> dict[str, Any]:
     """Sample U, p (internal mesh) and WSS (wall patch) on the model's grid; see the module doc.
 
     Parameters
@@ -296,12 +320,20 @@ def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: Ve
     p = p.reshape(shape)
     frame = local_frame(model, tau, theta)
     out = {
-        "tau": tau, "theta": theta, "rho_n": rho_n, "rho_w_mm": rho_w,
+        "tau": tau,
+        "theta": theta,
+        "rho_n": rho_n,
+        "rho_w_mm": rho_w,
         "points": P.reshape(*shape, 3),
-        "U": U, "U_vcs": to_vcs_components(U, frame),
-        "p": p * rho_density, "p_kinematic": p,
-        "n_tau": np.int64(n_tau), "n_theta": np.int64(n_theta), "n_rho": np.int64(n_rho),
-        "rho_scale": np.float64(rho_scale), "rho_density": np.float64(rho_density),
+        "U": U,
+        "U_vcs": to_vcs_components(U, frame),
+        "p": p * rho_density,
+        "p_kinematic": p,
+        "n_tau": np.int64(n_tau),
+        "n_theta": np.int64(n_theta),
+        "n_rho": np.int64(n_rho),
+        "rho_scale": np.float64(rho_scale),
+        "rho_density": np.float64(rho_density),
         "n_points": np.int64(P.shape[0]),
         "n_outside_mesh": np.int64(missing.sum()),
         "n_wall_noslip": np.int64(on_wall.sum()),
@@ -311,8 +343,11 @@ def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: Ve
     }
     wall = patches.get(wall_patch)
     if wall is not None:
-        Pw = P.reshape(*shape, 3)[:, :, -1].reshape(-1, 3) if rho_n[-1] == 1.0 else (
-            model.surface_points(*np.meshgrid(tau, theta, indexing="ij")).reshape(-1, 3) * rho_scale)
+        Pw = (
+            P.reshape(*shape, 3)[:, :, -1].reshape(-1, 3)
+            if rho_n[-1] == 1.0
+            else (model.surface_points(*np.meshgrid(tau, theta, indexing="ij")).reshape(-1, 3) * rho_scale)
+        )
         cell, tri, w, dist = _closest_on_surface(wall, Pw)
         if wss_name in wall.point_data:
             vals = np.asarray(wall.point_data[wss_name], float)
@@ -322,24 +357,46 @@ def sample_mesh(internal: pv.DataSet, patches: dict[str, pv.PolyData], model: Ve
         else:
             raise VCSInputError(f"the wall patch has no '{wss_name}' field; run the wallShearStress function object")
         wss = wss.reshape(n_tau, n_theta, 3)
-        out.update({"WSS": wss * rho_density, "WSS_kinematic": wss,
-                    "WSS_vcs": to_vcs_components(wss, frame) * rho_density,
-                    "wall_distance_max": np.float64(dist.max()), "wall_distance_mean": np.float64(dist.mean())})
+        out.update(
+            {
+                "WSS": wss * rho_density,
+                "WSS_kinematic": wss,
+                "WSS_vcs": to_vcs_components(wss, frame) * rho_density,
+                "wall_distance_max": np.float64(dist.max()),
+                "wall_distance_mean": np.float64(dist.mean()),
+            }
+        )
     out["method"] = np.str_(method)
     out["sample_time_s"] = np.float64(_time.perf_counter() - t0)
     out["interpolation_time_s"] = np.float64(t_probe - t0)
-    log.info("sampled %d points: %d outside the CFD mesh (%d on the wall, %d interior -> nearest cell, max %.3g)",
-             P.shape[0], missing.sum(), (missing & on_wall).sum(), interior_missing.sum(), out["interior_nearest_max_distance"])
+    log.info(
+        "sampled %d points: %d outside the CFD mesh (%d on the wall, %d interior -> nearest cell, max %.3g)",
+        P.shape[0],
+        missing.sum(),
+        (missing & on_wall).sum(),
+        interior_missing.sum(),
+        out["interior_nearest_max_distance"],
+    )
     if interior_missing.mean() > 0.05:
-        log.warning("%.1f%% of the interior grid points are outside the CFD mesh: do the model and the case match?",
-                    100 * interior_missing.mean())
+        log.warning(
+            "%.1f%% of the interior grid points are outside the CFD mesh: do the model and the case match?",
+            100 * interior_missing.mean(),
+        )
     return out
 
 
-def sample_case(case_dir: Path | str, model: VesselModel, *, n_tau: int = GRID_DEFAULTS["n_tau"],
-                n_theta: int = GRID_DEFAULTS["n_theta"], n_rho: int = GRID_DEFAULTS["n_rho"],
-                rho_scale: float = 1e-3, rho_density: float = 1060.0, time: float | None = None,
-                method: str = "mls") -> dict[str, Any]:
+def sample_case(
+    case_dir: Path | str,
+    model: VesselModel,
+    *,
+    n_tau: int = GRID_DEFAULTS["n_tau"],
+    n_theta: int = GRID_DEFAULTS["n_theta"],
+    n_rho: int = GRID_DEFAULTS["n_rho"],
+    rho_scale: float = 1e-3,
+    rho_density: float = 1060.0,
+    time: float | None = None,
+    method: str = "mls",
+) -> dict[str, Any]:
     """Sample a finished OpenFOAM case on the patient's (tau, theta, rho_n) grid (Section 2.4.2).
 
     Parameters
@@ -372,8 +429,17 @@ def sample_case(case_dir: Path | str, model: VesselModel, *, n_tau: int = GRID_D
     t0 = _time.perf_counter()
     internal, patches, t = read_case(case_dir, time=time)
     t_read = _time.perf_counter()
-    out = sample_mesh(internal, patches, model, n_tau=n_tau, n_theta=n_theta, n_rho=n_rho,
-                      rho_scale=rho_scale, rho_density=rho_density, method=method)
+    out = sample_mesh(
+        internal,
+        patches,
+        model,
+        n_tau=n_tau,
+        n_theta=n_theta,
+        n_rho=n_rho,
+        rho_scale=rho_scale,
+        rho_density=rho_density,
+        method=method,
+    )
     out["time"] = np.float64(t)
     out["read_time_s"] = np.float64(t_read - t0)
     out["n_cells"] = np.int64(internal.n_cells)
@@ -383,9 +449,22 @@ def sample_case(case_dir: Path | str, model: VesselModel, *, n_tau: int = GRID_D
 # ---------------------------------------------------------------------------------------------
 # Writing
 # ---------------------------------------------------------------------------------------------
-COUNT_KEYS = ("n_points", "n_outside_mesh", "n_wall_noslip", "n_wall_outside_mesh", "n_interior_nearest",
-              "interior_nearest_max_distance", "wall_distance_max", "wall_distance_mean", "n_cells", "time",
-              "read_time_s", "interpolation_time_s", "sample_time_s", "method")
+COUNT_KEYS = (
+    "n_points",
+    "n_outside_mesh",
+    "n_wall_noslip",
+    "n_wall_outside_mesh",
+    "n_interior_nearest",
+    "interior_nearest_max_distance",
+    "wall_distance_max",
+    "wall_distance_mean",
+    "n_cells",
+    "time",
+    "read_time_s",
+    "interpolation_time_s",
+    "sample_time_s",
+    "method",
+)
 
 
 def summary(fields: dict[str, Any]) -> dict[str, Any]:

@@ -2,6 +2,7 @@
 [decomposePar], simpleFoam (start-up, main stage, optional averaging fallback),
 [reconstructPar], wallShearStress; convergence, flow rates, pressure difference and WSS
 collected into ``status.json``."""
+
 from __future__ import annotations
 
 import json
@@ -50,8 +51,9 @@ class _Runner:
             fh.write(f"# {' '.join(cmd)}\n")
             fh.flush()
             try:
-                r = subprocess.run(cmd, cwd=self.case, env=self.env, stdout=fh, stderr=subprocess.STDOUT,
-                                   timeout=self.timeout)
+                r = subprocess.run(
+                    cmd, cwd=self.case, env=self.env, stdout=fh, stderr=subprocess.STDOUT, timeout=self.timeout
+                )
             except subprocess.TimeoutExpired:
                 r = subprocess.CompletedProcess(cmd, returncode=-9)
                 fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
@@ -81,7 +83,8 @@ def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
     fails = re.findall(r"\*\*\*.*", txt)
     m = re.search(r"Failed (\d+) mesh checks", txt)
     why = (f"checkMesh failed {m.group(1)} check(s): " if m else "checkMesh did not report 'Mesh OK.': ") + "; ".join(
-        f.strip() for f in fails[:5])
+        f.strip() for f in fails[:5]
+    )
     return False, cells, why
 
 
@@ -95,13 +98,14 @@ def _read_patch_vectors(field_file: Path, patch: str) -> NDArray[np.floating] | 
         return None if not m2 else np.array([[float(x) for x in m2.group(1).split()]])
     n = int(m.group(1))
     start = bf + m.end()
-    vals = re.findall(r"\(([^()]*)\)", txt[start:start + n * 80 + 1000])[:n]
+    vals = re.findall(r"\(([^()]*)\)", txt[start : start + n * 80 + 1000])[:n]
     return np.array([[float(x) for x in v.split()] for v in vals])
 
 
 def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
     """Write ``residuals.csv`` and (best effort) ``residuals.png`` of the parsed log rows."""
     import csv
+
     keys = ["iteration", "p", "U", "cont_local", "cont_global", "cont_cumulative"]
     with open(case_dir / "residuals.csv", "w", newline="") as fh:
         w = csv.writer(fh)
@@ -110,8 +114,10 @@ def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
             w.writerow([r.get("time") if k == "iteration" else r.get(k, "") for k in keys])
     try:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+
         fig, ax = plt.subplots(figsize=(6, 4))
         it = [r["time"] for r in rows]
         for k in ("p", "U"):
@@ -167,7 +173,7 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     cfd = state["cfd"]
     sol = cfd["solver"]
     ranks = max(int(ranks if ranks is not None else cfd.get("ranks", 1)), 1)
-    n = [1, 1, 1]                       # hierarchical/simple: split along the longest STL extent
+    n = [1, 1, 1]  # hierarchical/simple: split along the longest STL extent
     lo, hi = (np.array(b) for b in state["stl_bounds"])
     n[int(np.argmax(hi - lo))] = ranks
     state["decomposition_n"] = n
@@ -175,12 +181,22 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     timings: dict[str, float] = {}
     installed, version = detect_openfoam()
     status: dict[str, Any] = {
-        "case": str(case_dir), "flavour": state["flavour"], "openfoam_version": version, "ranks": ranks,
-        "converged": False, "criterion": f"initial residuals of p and U < {sol['tolerance']:g}",
-        "iterations": 0, "final_residuals": {}, "mass_imbalance": None, "cells": None,
-        "timings_s": timings, "reason": None, "inlet": {"type": cfd["inlet"]["type"]},
+        "case": str(case_dir),
+        "flavour": state["flavour"],
+        "openfoam_version": version,
+        "ranks": ranks,
+        "converged": False,
+        "criterion": f"initial residuals of p and U < {sol['tolerance']:g}",
+        "iterations": 0,
+        "final_residuals": {},
+        "mass_imbalance": None,
+        "cells": None,
+        "timings_s": timings,
+        "reason": None,
+        "inlet": {"type": cfd["inlet"]["type"]},
         "units": {"p": "m2/s2 (kinematic); *_Pa = x rho", "wallShearStress": "m2/s2 (kinematic); *_Pa = x rho"},
-        "rho": cfd["physics"]["rho"], "nu": cfd["physics"]["nu"],
+        "rho": cfd["physics"]["rho"],
+        "nu": cfd["physics"]["nu"],
     }
 
     def finish(reason: str | None = None, failed_log: str | None = None) -> dict[str, Any]:
@@ -212,7 +228,7 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     shutil.rmtree(case_dir / "constant" / "polyMesh", ignore_errors=True)
     for f in (case_dir / "logs").glob("log.*"):
         f.unlink()
-    render_files(case_dir, state, ["0/U", "0/p"])     # placeholder inlet until the mesh exists
+    render_files(case_dir, state, ["0/U", "0/p"])  # placeholder inlet until the mesh exists
 
     if run(["blockMesh"], "blockMesh").returncode != 0:
         return finish(_utility_failure(case_dir, "blockMesh"), "blockMesh")
@@ -245,8 +261,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     logs = []
     n_start = int(sol["startup_iterations"])
     if n_start > 0:
-        render_files(case_dir, state, stage_files, end_time=n_start, div_scheme=sol["startup_scheme"],
-                residual_control=False)
+        render_files(
+            case_dir, state, stage_files, end_time=n_start, div_scheme=sol["startup_scheme"], residual_control=False
+        )
         r = run(["simpleFoam"], "simpleFoam.startup", ranks)
         logs.append(case_dir / "logs" / "log.simpleFoam.startup")
         if r.returncode != 0:
@@ -260,13 +277,14 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
     last = main["rows"][-1] if main["rows"] else {}
     tol = float(sol["tolerance"])
-    converged = bool(last) and (main["converged_message"] or
-                                (last.get("p", 1) < tol and last.get("U", 1) < tol))
+    converged = bool(last) and (main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
     status["converged"] = converged
     averaged = False
     if not converged:
-        status["reason"] = (f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
-                            f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})")
+        status["reason"] = (
+            f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
+            f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
+        )
         if sol.get("fallback") == "average" and int(sol["average_iterations"]) > 0:
             status["averaging_from"] = int(last.get("time", sol["max_iterations"]))
             end = status["averaging_from"] + int(sol["average_iterations"])
@@ -279,8 +297,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
             averaged = True
     if ranks > 1:
         if run(["reconstructPar", "-latestTime"], "reconstructPar").returncode != 0:
-            return finish((status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed",
-                          "reconstructPar")
+            return finish(
+                (status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed", "reconstructPar"
+            )
     if averaged:
         tdir = case_dir / cast(str, _latest_time(case_dir))  # the averaging stage wrote a time folder
         _use_means(tdir)
@@ -293,10 +312,12 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     if averaged:
         rel = status.get("averaging", {}).get("max_initial_residual")
         status["converged_relaxed"] = bool(rel is not None and rel < float(sol["relaxed_tolerance"]))
-        status["reason"] += (f"; fallback: U and p are the time averages over the last {sol['average_iterations']} "
-                             f"iterations (pseudo-steady), max residual during averaging {rel:.3g} "
-                             f"(relaxed criterion {sol['relaxed_tolerance']:g}: "
-                             f"{'met' if status['converged_relaxed'] else 'not met'})")
+        status["reason"] += (
+            f"; fallback: U and p are the time averages over the last {sol['average_iterations']} "
+            f"iterations (pseudo-steady), max residual during averaging {rel:.3g} "
+            f"(relaxed criterion {sol['relaxed_tolerance']:g}: "
+            f"{'met' if status['converged_relaxed'] else 'not met'})"
+        )
     return finish()
 
 
@@ -330,14 +351,18 @@ def _pyfoam_check(log: Path) -> dict[str, Any] | None:
     """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration)."""
     try:
         from PyFoam.LogAnalysis.BoundingLogAnalyzer import BoundingLogAnalyzer
+
         a = BoundingLogAnalyzer(doFiles=False, doTimelines=True)
         with open(log) as fh:
             a.analyze(fh)
         lin = a.getAnalyzer("Linear").getCurrentData()
         cont = a.getAnalyzer("Continuity").getCurrentData()
-        return {"log": log.name, "last_iteration": float(a.getTime()),
-                "initial_residuals": {k: v for k, v in lin.items() if "_" not in k},
-                "continuity": cont}
+        return {
+            "log": log.name,
+            "last_iteration": float(a.getTime()),
+            "initial_residuals": {k: v for k, v in lin.items() if "_" not in k},
+            "continuity": cont,
+        }
     except Exception as exc:  # noqa: BLE001 - optional cross-check only
         return {"error": f"{type(exc).__name__}: {exc}"}
 
@@ -357,12 +382,16 @@ def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: di
         last = rows[-1]
         status["iterations"] = int(last["time"])
         status["final_residuals"] = {k: last[k] for k in ("p", "U") if k in last}
-        status["continuity_errors"] = {k.replace("cont_", ""): last[k] for k in
-                                       ("cont_local", "cont_global", "cont_cumulative") if k in last}
+        status["continuity_errors"] = {
+            k.replace("cont_", ""): last[k] for k in ("cont_local", "cont_global", "cont_cumulative") if k in last
+        }
         if logs and logs[-1].name.endswith(".average"):
             avg_rows = parse_solver_log(logs[-1])["rows"]
-            status["averaging"] = {"max_initial_residual": float(max(max(r.get("p", 0), r.get("U", 0)) for r in avg_rows))
-                                   if avg_rows else None}
+            status["averaging"] = {
+                "max_initial_residual": float(max(max(r.get("p", 0), r.get("U", 0)) for r in avg_rows))
+                if avg_rows
+                else None
+            }
     status["pyfoam_log_analysis"] = _pyfoam_check(logs[-1]) if logs else None
     rho = float(state["cfd"]["physics"]["rho"])
     avg_from = status.get("averaging_from")
@@ -383,8 +412,7 @@ def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: di
     q_out = sum(v for k, v in flows.items() if v is not None and patch_role(k) == "outlet")
     if q_in:
         status["mass_imbalance"] = abs(q_in + q_out) / abs(q_in)
-    pin = {p["name"]: fo_value(f"pressure_{p['name']}") for p in state["patches"]
-           if p["role"] in ("inlet", "outlet")}
+    pin = {p["name"]: fo_value(f"pressure_{p['name']}") for p in state["patches"] if p["role"] in ("inlet", "outlet")}
     status["patch_pressure"] = pin
     pi = [v for k, v in pin.items() if patch_role(k) == "inlet" and v is not None]
     po = [v for k, v in pin.items() if patch_role(k) == "outlet" and v is not None]
@@ -409,7 +437,10 @@ def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: di
                         areas.append(a)
                 if vals:
                     mag, a = np.concatenate(vals), np.concatenate(areas)
-                    status["wall_shear_stress_Pa"] = {"mean": float((mag * a).sum() / a.sum() * rho),
-                                                      "max": float(mag.max() * rho), "min": float(mag.min() * rho)}
+                    status["wall_shear_stress_Pa"] = {
+                        "mean": float((mag * a).sum() / a.sum() * rho),
+                        "max": float(mag.max() * rho),
+                        "min": float(mag.min() * rho),
+                    }
             except Exception as exc:  # noqa: BLE001
                 status["wall_shear_stress_Pa"] = {"error": str(exc)}

@@ -5,6 +5,7 @@ One module per command group (:mod:`vcs.cli.fit`, :mod:`vcs.cli.points`, :mod:`v
 :mod:`vcs.cli._args`, the parser and :func:`main` in :mod:`vcs.cli.main`. Command modules never
 import this package or :mod:`vcs.cli.main`.
 """
+
 from vcs.cli.main import build_parser, main
 
 __all__ = ["build_parser", "main"]

@@ -3,6 +3,7 @@
 argparse types for integer ranges, the output-path checks (an output directory, never an input
 overwritten) and the JSON writer. Imports nothing from the rest of :mod:`vcs.cli`.
 """
+
 from __future__ import annotations
 
 import argparse

@@ -1,4 +1,5 @@
 """`vcs fit`: fit the VCS and the wall model of a vessel section, write model.json and its report."""
+
 from __future__ import annotations
 
 import argparse
@@ -31,22 +32,38 @@ def cmd_fit(args: argparse.Namespace) -> None:
     for name in ("model.json", "fit_report.json", "centerline.vtp", "wall_residuals.vtp"):
         not_an_input(out / name, args.mesh, args.inlet_cap, args.outlet_cap)
     model, report, wall_fit = fit_vessel(
-        args.mesh, units=args.units, inlet=args.inlet, outlet=args.outlet,
-        inlet_cap=args.inlet_cap, outlet_cap=args.outlet_cap, cap_array=args.cap_array,
-        L=args.L, K=args.K, R=args.R, recentre_iterations=args.recentre,
+        args.mesh,
+        units=args.units,
+        inlet=args.inlet,
+        outlet=args.outlet,
+        inlet_cap=args.inlet_cap,
+        outlet_cap=args.outlet_cap,
+        cap_array=args.cap_array,
+        L=args.L,
+        K=args.K,
+        R=args.R,
+        recentre_iterations=args.recentre,
     )
     s = model.scale_to_mm
     tau = np.linspace(0, 1, 401)
     t, v1, v2 = model.vcs.frame(tau)
     write_polyline_vtp(
-        out / "centerline.vtp", model.vcs.curve(tau) / s,
+        out / "centerline.vtp",
+        model.vcs.curve(tau) / s,
         {"tau": tau, "t": t, "v1": v1, "v2": v2, "curvature_per_mm": model.vcs.curvature(tau)},
     )
     if wall_fit is not None:
         write_points_vtp(
-            out / "wall_residuals.vtp", wall_fit.points / s,
-            {"residual": wall_fit.residual / s, "tau": wall_fit.tau, "theta": wall_fit.theta,
-             "rho": wall_fit.rho / s, "used": wall_fit.used.astype(np.int8), "reason": wall_fit.reason},
+            out / "wall_residuals.vtp",
+            wall_fit.points / s,
+            {
+                "residual": wall_fit.residual / s,
+                "tau": wall_fit.tau,
+                "theta": wall_fit.theta,
+                "rho": wall_fit.rho / s,
+                "used": wall_fit.used.astype(np.int8),
+                "reason": wall_fit.reason,
+            },
         )
         if args.residual_png:
             from vcs.plots import residual_map
@@ -57,8 +74,10 @@ def cmd_fit(args: argparse.Namespace) -> None:
     model.save(out / "model.json")  # last and atomic: its presence means the fit is complete
     msg = f"fitted {args.mesh}: ends by {report['ends_method']}, length {report['centerline_length_mm']:.1f} mm"
     if wall_fit is not None:
-        msg += (f", residual mean {report['residual_mean_mm']:.4f} mm over {report['n_points_used']}"
-                f"/{report['n_wall_points']} wall points")
+        msg += (
+            f", residual mean {report['residual_mean_mm']:.4f} mm over {report['n_points_used']}"
+            f"/{report['n_wall_points']} wall points"
+        )
     print(msg + f" -> {out}")
     for w in report["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
@@ -75,8 +94,12 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     f = subparsers.add_parser("fit", help="fit the VCS and wall model of a vessel section")
     f.add_argument("mesh", help="wall surface: STL, VTP, VTK, PLY or OBJ")
     f.add_argument("-o", "--output", required=True, help="output directory")
-    f.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m"],
-                   help="units of the mesh; auto: largest extent <1 -> m, <25 -> cm, else mm (reported)")
+    f.add_argument(
+        "--units",
+        default="auto",
+        choices=["auto", "mm", "cm", "m"],
+        help="units of the mesh; auto: largest extent <1 -> m, <25 -> cm, else mm (reported)",
+    )
     f.add_argument("--inlet", help="x,y,z point in or near the inlet end plane (tau = 0), mesh units")
     f.add_argument("--outlet", help="x,y,z point in or near the outlet end plane (tau = 1), mesh units")
     f.add_argument("--inlet-cap", help="surface file of the inlet cap (same units as the mesh)")
@@ -85,7 +108,11 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     f.add_argument("--L", type=positive_int, default=9, help="centerline interior knots (paper: 9)")
     f.add_argument("--K", type=positive_int, default=19, help="wall knots in tau (paper: 19)")
     f.add_argument("--R", type=positive_int, default=15, help="wall knots in theta (paper: 15)")
-    f.add_argument("--recentre", type=non_negative_int, default=3,
-                   help="centerline re-centring iterations on the wall (0 = paper's A*+spline only)")
+    f.add_argument(
+        "--recentre",
+        type=non_negative_int,
+        default=3,
+        help="centerline re-centring iterations on the wall (0 = paper's A*+spline only)",
+    )
     f.add_argument("--residual-png", action="store_true", help="also write residual_map.png")
     f.set_defaults(func=cmd_fit)

@@ -2,6 +2,7 @@
 
 Bad input ends with one line on stderr naming the problem and the fix, and exit code 2.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -18,8 +19,13 @@ from vcs.cli.wall import add_commands as add_wall_commands
 from vcs.errors import VCSInputError
 
 # the order of the subcommands in `vcs --help`
-_COMMAND_GROUPS = (add_fit_commands, add_points_commands, add_phantom_commands, add_wall_commands,
-                   add_sensitivity_commands)
+_COMMAND_GROUPS = (
+    add_fit_commands,
+    add_points_commands,
+    add_phantom_commands,
+    add_wall_commands,
+    add_sensitivity_commands,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -55,8 +61,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )
     if not args.verbose:  # numerical warnings are for developers; users get fit_report warnings
         warnings.simplefilter("ignore")
     try:
@@ -70,7 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # a bug, not bad input: one line, the traceback only with -v
         if args.verbose:
             raise
-        print(f"vcs {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with -v and report it)",
-              file=sys.stderr)
+        print(
+            f"vcs {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with -v and report it)",
+            file=sys.stderr,
+        )
         return 1
     return 0

@@ -1,4 +1,5 @@
 """`vcs phantom`: write a synthetic vessel surface (STL, mm) and optionally its generator parameters."""
+
 from __future__ import annotations
 
 import argparse

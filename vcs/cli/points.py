@@ -1,4 +1,5 @@
 """`vcs coords` and `vcs cartesian`: points <-> VCS coordinates (tau, theta, rho) with a fitted model."""
+
 from __future__ import annotations
 
 import argparse
@@ -22,8 +23,10 @@ def cmd_coords(args: argparse.Namespace) -> None:
     s = model.scale_to_mm
     pts = read_points_table(args.points) * s
     tau, theta, rho, ok = model.vcs.to_vcs(pts)
-    write_csv(not_an_input(args.output, args.points, args.model),
-              {"tau": tau, "theta": theta, "rho": rho / s, "in_omega": ok.astype(int)})
+    write_csv(
+        not_an_input(args.output, args.points, args.model),
+        {"tau": tau, "theta": theta, "rho": rho / s, "in_omega": ok.astype(int)},
+    )
     print(f"{len(pts)} points -> {args.output} ({int((~ok).sum())} outside Omega)")
 
 

@@ -1,4 +1,5 @@
 """`vcs sensitivity`: wall-model residuals over ranges of the knot numbers L, K, R (paper Fig. 5)."""
+
 from __future__ import annotations
 
 import argparse
@@ -33,8 +34,10 @@ def cmd_sensitivity(args: argparse.Namespace) -> None:
     write_csv(out / "sensitivity.csv", {k: np.array([r[k] for r in rows]) for k in rows[0]})
     plot_sweep(rows, out / "sensitivity.png")
     best = min(rows, key=lambda r: r["residual_mean_mm"])
-    print(f"{len(rows)} settings x {len(surfaces)} meshes -> {out}; lowest mean residual "
-          f"{best['residual_mean_mm']:.4f} mm at L={best['L']} K={best['K']} R={best['R']}")
+    print(
+        f"{len(rows)} settings x {len(surfaces)} meshes -> {out}; lowest mean residual "
+        f"{best['residual_mean_mm']:.4f} mm at L={best['L']} K={best['K']} R={best['R']}"
+    )
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:

@@ -1,4 +1,5 @@
 """`vcs wall` and `vcs grid`: the model wall (Eq. 8) as a closed STL, the measurement grid as VTU."""
+
 from __future__ import annotations
 
 import argparse
@@ -31,8 +32,9 @@ def cmd_wall(args: argparse.Namespace) -> None:
     from vcs.vessel import VesselModel
 
     model = VesselModel.load(args.model)
-    mesh = wall_mesh(model, n_tau=args.n_tau, n_theta=args.n_theta,
-                     extend_inlet=args.extend_inlet, extend_outlet=args.extend_outlet)
+    mesh = wall_mesh(
+        model, n_tau=args.n_tau, n_theta=args.n_theta, extend_inlet=args.extend_inlet, extend_outlet=args.extend_outlet
+    )
     out = not_an_input(args.output, args.model)
     if out.suffix.lower() != ".stl":
         raise VCSInputError(f"output '{out}' must end in .stl")
@@ -59,16 +61,19 @@ def cmd_grid(args: argparse.Namespace) -> None:
     model = VesselModel.load(args.model)
     g = measurement_grid(model, n_tau=args.n_tau, n_theta=args.n_theta, n_rho=args.n_rho, scheme=args.scheme)
     cells = np.hstack([np.full((len(g.cells), 1), 8), g.cells]).ravel()
-    ug = pv.UnstructuredGrid(cells, np.full(len(g.cells), pv.CellType.HEXAHEDRON, np.uint8),
-                             g.points / UNIT_TO_MM[args.units])
+    ug = pv.UnstructuredGrid(
+        cells, np.full(len(g.cells), pv.CellType.HEXAHEDRON, np.uint8), g.points / UNIT_TO_MM[args.units]
+    )
     ug.point_data["tau"] = g.tau
     ug.point_data["theta"] = g.theta
     ug.point_data["rho_n"] = g.rho_n
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     ug.save(str(out))
-    print(f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, "
-          f"{ug.n_cells} cells -> {out}")
+    print(
+        f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, "
+        f"{ug.n_cells} cells -> {out}"
+    )
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
@@ -92,13 +97,26 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     g = subparsers.add_parser("grid", help="write the (tau, theta, rho_n) measurement grid as VTU")
     g.add_argument("model", help="model.json from `vcs fit`")
     g.add_argument("-o", "--output", required=True, help="output .vtu")
-    g.add_argument("--n-tau", type=int_at_least(2), default=GRID_DEFAULTS["n_tau"],
-                   help="nodes along tau, both ends included (as grid.n_tau of the workflow)")
-    g.add_argument("--n-theta", type=int_at_least(4), default=GRID_DEFAULTS["n_theta"],
-                   help="nodes around theta (as grid.n_theta)")
-    g.add_argument("--n-rho", type=int_at_least(2), default=GRID_DEFAULTS["n_rho"],
-                   help="nodes from the axis to the wall, both included (as grid.n_rho)")
-    g.add_argument("--scheme", default="cylindrical", choices=["cylindrical", "ogrid"],
-                   help="cylindrical: the paper's grid, the nodes of fields.npz; ogrid: Cartesian core (visual)")
+    g.add_argument(
+        "--n-tau",
+        type=int_at_least(2),
+        default=GRID_DEFAULTS["n_tau"],
+        help="nodes along tau, both ends included (as grid.n_tau of the workflow)",
+    )
+    g.add_argument(
+        "--n-theta", type=int_at_least(4), default=GRID_DEFAULTS["n_theta"], help="nodes around theta (as grid.n_theta)"
+    )
+    g.add_argument(
+        "--n-rho",
+        type=int_at_least(2),
+        default=GRID_DEFAULTS["n_rho"],
+        help="nodes from the axis to the wall, both included (as grid.n_rho)",
+    )
+    g.add_argument(
+        "--scheme",
+        default="cylindrical",
+        choices=["cylindrical", "ogrid"],
+        help="cylindrical: the paper's grid, the nodes of fields.npz; ogrid: Cartesian core (visual)",
+    )
     g.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the VTU points")
     g.set_defaults(func=cmd_grid)

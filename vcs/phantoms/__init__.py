@@ -15,6 +15,7 @@ Modules
 
 Only numpy and scipy are used (no mesh libraries), so the package can run anywhere the VCS runs.
 """
+
 from vcs.phantoms.analytic import write_closed_tube_stl
 from vcs.phantoms.aorta import AORTA_EDGE_SCALE
 from vcs.phantoms.factory import KINDS, make_phantom

@@ -14,6 +14,7 @@ constant radius meshed by the shared sweep (:mod:`vcs.phantoms.sweep`); build th
 :func:`write_closed_tube_stl` writes a closed straight tube (lengths in metres) as a multi-solid
 ASCII STL ``wall``/``inlet``/``outlet`` for OpenFOAM tests against the Hagen-Poiseuille solution.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -7,6 +7,7 @@ rotation-minimising frame and the wall radius, and ``_aorta`` redraws until the 
 the anatomical and self-intersection checks, then meshes it with the shared sweep
 (:mod:`vcs.phantoms.sweep`). Build one with ``vcs.phantoms.make_phantom("aorta", seed=...)``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -122,8 +123,11 @@ def _aorta_sample(rng: np.random.Generator) -> dict:
     # elongation); 75 % of each length's position in its range follows the diameter's, so the
     # diameter is the generator's dominant parameter (ranges and the random stream unchanged)
     z = (q["ascending_diameter_mm"] - 28.0) / 20.0
-    for key, lo, hi in (("ascending_length_mm", 80.0, 105.0), ("arch_curvature_radius_mm", 28.0, 45.0),
-                        ("target_length_mm", 280.0, 340.0)):
+    for key, lo, hi in (
+        ("ascending_length_mm", 80.0, 105.0),
+        ("arch_curvature_radius_mm", 28.0, 45.0),
+        ("target_length_mm", 280.0, 340.0),
+    ):
         q[key] = lo + (hi - lo) * (0.75 * z + 0.25 * (q[key] - lo) / (hi - lo))
     return q
 

@@ -1,4 +1,5 @@
 """``make_phantom``: build a phantom of any kind (analytic tube/torus/helix or seeded aorta)."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -15,6 +15,7 @@ This module holds the :class:`Phantom` record, what a kind's generator hands bac
 ring spacing, the reach (self-intersection) check, the parameter helpers and the STL writer
 (through :func:`vcs.mesh.write_stl_binary`).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable

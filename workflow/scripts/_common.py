@@ -2,6 +2,7 @@
 
 Imported by the scripts of workflow/scripts/ (``sys.path`` gets ``snakemake.scriptdir`` first).
 """
+
 from __future__ import annotations
 
 import logging
@@ -16,8 +17,9 @@ def setup(snakemake, name: str) -> logging.Logger:
     sys.stderr.flush()
     os.dup2(log_file.fileno(), 2)  # C-level stderr too (VTK, OpenFOAM readers)
     sys.stderr = log_file
-    logging.basicConfig(stream=log_file, level=logging.INFO, force=True,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        stream=log_file, level=logging.INFO, force=True, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
     return logging.getLogger(name)
 
 

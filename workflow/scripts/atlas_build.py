@@ -1,5 +1,6 @@
 """Rule atlas_build: the cohort atlas (vcs.atlas.build_atlas) from every patient's model, fields
 and status; excluded patients are listed in atlas.json with the reason from their status."""
+
 import json
 import shutil
 import sys
@@ -23,8 +24,11 @@ def main(smk):
             statuses[pid] = json.load(fh)
     options = json.loads(json.dumps(dict(smk.params.options)))
     accept = bool(options.get("accept_relaxed", False))
-    fields = {pid: path for pid, path in zip(ids, smk.input.fields)
-              if status_exclusion(statuses[pid], accept_relaxed=accept) is None}
+    fields = {
+        pid: path
+        for pid, path in zip(ids, smk.input.fields)
+        if status_exclusion(statuses[pid], accept_relaxed=accept) is None
+    }
     figures = bool(options.pop("figures", True))
     out_dir = Path(smk.output.json).parent
     atlas = build_atlas(models, fields, statuses, out_dir, figures=figures, **options)

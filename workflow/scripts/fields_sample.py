@@ -4,6 +4,7 @@ Cases without a usable solution (failed, or not converged and not even within th
 criterion of the time-averaged fallback) get placeholder outputs that only carry the reason: the
 atlas excludes them from their status anyway.
 """
+
 import json
 import sys
 
@@ -52,11 +53,24 @@ def main(smk):
 
     grid = dict(smk.params.grid)
     model = VesselModel.load(smk.input.model)
-    fields = sample_case(smk.input.case, model, n_tau=grid["n_tau"], n_theta=grid["n_theta"], n_rho=grid["n_rho"],
-                         rho_scale=1e-3, rho_density=float(smk.params.rho))
+    fields = sample_case(
+        smk.input.case,
+        model,
+        n_tau=grid["n_tau"],
+        n_theta=grid["n_theta"],
+        n_rho=grid["n_rho"],
+        rho_scale=1e-3,
+        rho_density=float(smk.params.rho),
+    )
     write_fields(fields, smk.output.npz, vtu_path=smk.output.vtu)
-    log.info("%s resampled on %dx%dx%d -> %s", smk.wildcards.id, grid["n_tau"], grid["n_theta"], grid["n_rho"],
-             smk.output.npz)
+    log.info(
+        "%s resampled on %dx%dx%d -> %s",
+        smk.wildcards.id,
+        grid["n_tau"],
+        grid["n_theta"],
+        grid["n_rho"],
+        smk.output.npz,
+    )
 
 
 _common.run(main, snakemake, log)  # noqa: F821

@@ -1,4 +1,5 @@
 """Rule openfoam_case: render the OpenFOAM case of one patient (vcs.cfd.render_case)."""
+
 import json
 import sys
 from pathlib import Path
@@ -24,9 +25,16 @@ def main(smk):
         Path(smk.output.case).mkdir(parents=True, exist_ok=True)
         (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps({"reason": reason}) + "\n")
         return
-    log.info("case for %s (flavour %s): background %s cells of %g m, inside point %s, Q %.4g m3/s -> %s",
-             smk.wildcards.id, state["flavour"], "x".join(map(str, state["ncells"])),
-             state["cfd"]["mesh"]["cell_size"], state["inside_point"], state["flow_rate"], smk.output.case)
+    log.info(
+        "case for %s (flavour %s): background %s cells of %g m, inside point %s, Q %.4g m3/s -> %s",
+        smk.wildcards.id,
+        state["flavour"],
+        "x".join(map(str, state["ncells"])),
+        state["cfd"]["mesh"]["cell_size"],
+        state["inside_point"],
+        state["flow_rate"],
+        smk.output.case,
+    )
 
 
 _common.run(main, snakemake, log)  # noqa: F821

@@ -4,6 +4,7 @@ A per-patient failure (meshing, divergence, not converged) is NOT a job failure:
 status.json (converged false, reason) for the atlas to exclude the patient. Only a broken set-up
 (no OpenFOAM, missing case) fails the job, with one line in the log.
 """
+
 import json
 import shutil
 import sys
@@ -20,7 +21,9 @@ def main(smk):
     from vcs.cfd import detect_openfoam, run_case
 
     if detect_openfoam()[0] is None:
-        raise FileNotFoundError("no OpenFOAM installation found (simpleFoam not on PATH); run `bash scripts/install.sh`")
+        raise FileNotFoundError(
+            "no OpenFOAM installation found (simpleFoam not on PATH); run `bash scripts/install.sh`"
+        )
     # always a fresh copy of the rendered case: nothing of an interrupted or earlier run (time or
     # processor* directories, logs, polyMesh) may leak into this one (Snakemake normally removes
     # the output before the job starts; this also covers --touch/--notemp leftovers)
@@ -29,23 +32,38 @@ def main(smk):
     failed_setup = Path(smk.output.case) / "SETUP_FAILED.json"  # written by openfoam_case.py
     try:
         if failed_setup.exists():
-            status = {"converged": False, "failed": True, "case": smk.output.case,
-                      "reason": json.loads(failed_setup.read_text())["reason"],
-                      "failed_log": str((Path(smk.log[0]).parent.parent / "openfoam_case" / f"{smk.wildcards.id}.log").resolve())}
+            status = {
+                "converged": False,
+                "failed": True,
+                "case": smk.output.case,
+                "reason": json.loads(failed_setup.read_text())["reason"],
+                "failed_log": str(
+                    (Path(smk.log[0]).parent.parent / "openfoam_case" / f"{smk.wildcards.id}.log").resolve()
+                ),
+            }
         else:
             status = run_case(smk.output.case, ranks=smk.threads)
     except Exception as exc:  # a crash on this patient must not stop the cohort: record it
         log.error("run_case crashed\n%s", traceback.format_exc())
-        status = {"converged": False, "failed": True, "case": smk.output.case,
-                  "reason": f"vcs.cfd.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}",
-                  "failed_log": str(Path(smk.log[0]).resolve())}
+        status = {
+            "converged": False,
+            "failed": True,
+            "case": smk.output.case,
+            "reason": f"vcs.cfd.run_case crashed: {type(exc).__name__}: {' '.join(str(exc).split())}",
+            "failed_log": str(Path(smk.log[0]).resolve()),
+        }
     status["patient"] = smk.wildcards.id
     with open(smk.output.status, "w") as fh:
         json.dump(status, fh, indent=2, default=float)
-    log.info("%s: converged %s after %s iterations, %s cells, %.1f s in OpenFOAM%s", smk.wildcards.id,
-             status.get("converged"), status.get("iterations"), status.get("cells"),
-             float(status.get("timings_s", {}).get("total", 0.0)),
-             f"; reason: {status['reason']}" if status.get("reason") else "")
+    log.info(
+        "%s: converged %s after %s iterations, %s cells, %.1f s in OpenFOAM%s",
+        smk.wildcards.id,
+        status.get("converged"),
+        status.get("iterations"),
+        status.get("cells"),
+        float(status.get("timings_s", {}).get("total", 0.0)),
+        f"; reason: {status['reason']}" if status.get("reason") else "",
+    )
 
 
 _common.run(main, snakemake, log)  # noqa: F821
