@@ -1,4 +1,4 @@
-"""Reading and writing surfaces, polylines and tables (the only module of `vcs` that uses pyvista).
+"""Reading surfaces (pyvista readers) and point/coordinate tables; writing tables.
 
 Everything inside `vcs` is in millimetres. `read_surface` converts the input units once, and
 records the factor so outputs can be given back in the units of the input mesh.

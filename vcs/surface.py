@@ -184,6 +184,79 @@ def wall_mesh(
     return WallMesh(V, F, S)
 
 
+def fold_check(model: VesselModel, *, n_tau: int = 401, n_theta: int = 72) -> dict[str, float]:
+    """Where the Eq. 8 wall would fold over itself: a radius rho_w <= 0 (the wall passes through
+    the centerline), or rho_w (e_rho . K) >= 1 with K the curvature vector of c (the wall reaches
+    past the centre of curvature on the inner side of a bend: the Jacobian of Eq. 8 vanishes).
+
+    Parameters
+    ----------
+    model : VesselModel
+        With a wall model; mm.
+    n_tau, n_theta : int
+        Sampling of (tau, theta) on [0, 1] x [0, 2 pi).
+
+    Returns
+    -------
+    dict
+        ``min_radius_mm`` and its ``tau_at_min_radius``; ``max_fold`` = max of
+        rho_w (e_rho . K) (dimensionless; >= 1 folds) and its ``tau_at_max_fold``.
+    """
+    tau = np.linspace(0.0, 1.0, n_tau)
+    theta = np.linspace(0.0, TWO_PI, n_theta, endpoint=False)
+    rho = model.fitted_wall()(tau[:, None], theta[None, :])
+    curve = model.vcs.curve
+    d1, d2 = curve.derivative(1)(tau), curve.derivative(2)(tau)
+    speed2 = np.einsum("ij,ij->i", d1, d1)
+    t = d1 / np.sqrt(speed2)[:, None]
+    K = (d2 - np.einsum("ij,ij->i", d2, t)[:, None] * t) / speed2[:, None]  # curvature vector, 1/mm
+    _, v1, v2 = model.vcs.frame(tau)
+    k1, k2 = np.einsum("ij,ij->i", v1, K), np.einsum("ij,ij->i", v2, K)
+    fold = rho * (np.cos(theta)[None, :] * k1[:, None] + np.sin(theta)[None, :] * k2[:, None])
+    i_min = int(np.unravel_index(np.argmin(rho), rho.shape)[0])
+    i_fold = int(np.unravel_index(np.argmax(fold), fold.shape)[0])
+    return {
+        "min_radius_mm": float(rho.min()),
+        "tau_at_min_radius": float(tau[i_min]),
+        "max_fold": float(fold.max()),
+        "tau_at_max_fold": float(tau[i_fold]),
+    }
+
+
+def check_closed(mesh: WallMesh) -> dict[str, float | int | bool]:
+    """Is the Eq. 8 wall a valid closed volume for snappyHexMesh? (trimesh's mesh checks)
+
+    Parameters
+    ----------
+    mesh : WallMesh
+        Vertices in mm.
+
+    Returns
+    -------
+    dict
+        ``watertight`` (every edge shared by exactly two faces), ``winding_consistent``,
+        ``volume_mm3`` (enclosed volume; positive when the faces point outward),
+        ``euler_number`` (2 for a closed surface of genus 0, i.e. a tube with two caps),
+        ``min_angle_deg`` (smallest triangle angle) and ``closed`` (all of the above hold:
+        watertight, consistent, positive volume, Euler number 2).
+    """
+    import trimesh
+
+    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    angles = np.degrees(tm.face_angles.min()) if len(tm.faces) else 0.0
+    out: dict[str, float | int | bool] = {
+        "watertight": bool(tm.is_watertight),
+        "winding_consistent": bool(tm.is_winding_consistent),
+        "volume_mm3": float(tm.volume),
+        "euler_number": int(tm.euler_number),
+        "min_angle_deg": float(angles),
+    }
+    out["closed"] = bool(
+        out["watertight"] and out["winding_consistent"] and out["volume_mm3"] > 0 and out["euler_number"] == 2
+    )
+    return out
+
+
 def write_multisolid_stl(mesh: WallMesh, path: Path | str, scale: float = 1.0) -> None:
     """Write a wall mesh as ASCII STL with one solid per patch name (snappyHexMesh's patch names).
 

@@ -88,6 +88,50 @@ def test_wall_stl_is_closed_outward_on_model_and_well_shaped(kind):
     assert np.degrees(np.min(ang)) >= 15.0
 
 
+def test_fold_check_on_a_torus_is_tube_over_major_radius():
+    """fold_check's rho_w (e_rho . K) peaks on the inner side of a torus arc at r / R (analytic)."""
+    from vcs.surface import fold_check
+
+    ph = make_phantom("torus", seed=1, resolution=1.5)
+    model, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", "torus"))
+    f = fold_check(model)
+    r, R = ph.params["tube_radius_mm"], ph.params["major_radius_mm"]
+    assert f["max_fold"] == pytest.approx(r / R, rel=0.02)
+    assert f["min_radius_mm"] == pytest.approx(r, rel=0.02)
+
+
+def test_closed_check_and_vcs_wall_refuses_a_folded_wall(tmp_path, capsys):
+    """check_closed (trimesh) accepts the Eq. 8 wall of a fit, with the independent volume of
+    mesh.signed_volume, and rejects it with a face removed; `vcs wall` refuses, with one line and
+    exit 2, a model whose wall radius is negative on one ring (the wall folds through the
+    centerline: trimesh still finds that surface closed, so fold_check is what catches it) and
+    writes no STL."""
+    from vcs.cli import main
+    from vcs.surface import WallMesh, check_closed
+
+    ph = make_phantom("tube", resolution=2.0)
+    model, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", "tube"))
+    w = wall_mesh(model)
+    good = check_closed(w)
+    assert good["closed"] and good["euler_number"] == 2
+    assert good["volume_mm3"] == pytest.approx(signed_volume(w.vertices, w.faces), rel=1e-9)
+    holed = check_closed(WallMesh(w.vertices, w.faces[1:], w.solid[1:]))
+    assert not holed["closed"] and not holed["watertight"]
+
+    model.save(tmp_path / "model.json")
+    d = json.loads((tmp_path / "model.json").read_text())
+    b = np.asarray(d["wall"]["coefficients"])
+    b[b.shape[0] // 2, :] = -b[b.shape[0] // 2, :]  # one ring of coefficients negative: a local fold
+    d["wall"]["coefficients"] = b.tolist()
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    assert main(["wall", str(tmp_path / "bad.json"), "-o", str(tmp_path / "w.stl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "radius is -" in err[0] and "fold through the centerline" in err[0], err
+    assert not (tmp_path / "w.stl").exists()
+    assert main(["wall", str(tmp_path / "model.json"), "-o", str(tmp_path / "w.stl")]) == 0
+    assert "closed, volume" in capsys.readouterr().out
+
+
 def test_sensitivity_csv(tmp_path):
     from vcs.cli import main
     from vcs.phantoms import write_stl

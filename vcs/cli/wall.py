@@ -28,7 +28,7 @@ def cmd_wall(args: argparse.Namespace) -> None:
     VCSInputError
         The output does not end in .stl or is the input model.
     """
-    from vcs.surface import wall_mesh, write_multisolid_stl
+    from vcs.surface import check_closed, fold_check, wall_mesh, write_multisolid_stl
     from vcs.vessel import VesselModel
 
     model = VesselModel.load(args.model)
@@ -38,9 +38,31 @@ def cmd_wall(args: argparse.Namespace) -> None:
     out = not_an_input(args.output, args.model)
     if out.suffix.lower() != ".stl":
         raise VCSInputError(f"output '{out}' must end in .stl")
+    fold = fold_check(model)
+    if fold["min_radius_mm"] <= 0:
+        raise VCSInputError(
+            f"the wall model's radius is {fold['min_radius_mm']:.3g} mm at tau = {fold['tau_at_min_radius']:.3f} "
+            "(it must be positive): the wall would fold through the centerline; check fit_report.json and refit"
+        )
+    if fold["max_fold"] >= 1:
+        raise VCSInputError(
+            f"the wall radius exceeds the centerline's radius of curvature at tau = {fold['tau_at_max_fold']:.3f} "
+            f"(rho_w kappa = {fold['max_fold']:.3g}): the wall would fold on the inner side of "
+            "the bend; check fit_report.json and refit"
+        )
+    check = check_closed(mesh)
+    if not check["closed"]:
+        raise VCSInputError(
+            f"the model wall is not a closed surface (watertight {check['watertight']}, consistent winding "
+            f"{check['winding_consistent']}, volume {check['volume_mm3']:.4g} mm3, Euler number "
+            f"{check['euler_number']}): the wall model folds over itself; check fit_report.json and refit"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     write_multisolid_stl(mesh, out, scale=1.0 / UNIT_TO_MM[args.units])
-    print(f"wall (Eq. 8) with {len(mesh.faces)} triangles, solids wall/inlet/outlet, in {args.units} -> {out}")
+    print(
+        f"wall (Eq. 8) with {len(mesh.faces)} triangles, solids wall/inlet/outlet, in {args.units} -> {out}; "
+        f"closed, volume {check['volume_mm3']:.6g} mm3, smallest angle {check['min_angle_deg']:.1f} deg"
+    )
 
 
 def cmd_grid(args: argparse.Namespace) -> None:
