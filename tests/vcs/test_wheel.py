@@ -3,6 +3,7 @@ from a non-editable install of it (no source tree on the path)."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import zipfile
