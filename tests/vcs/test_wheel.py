@@ -17,8 +17,15 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
+    # build from a copy: pip builds in the source folder (build/, *.egg-info), which must stay clean
+    src = out / "src"
+    skip = shutil.ignore_patterns(
+        ".git", ".venv", "results", "build", "*.egg-info", "__pycache__", ".snakemake", "test-artifacts", ".*_cache"
+    )
+    shutil.copytree(REPO, src, ignore=skip)
     r = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(REPO), "-w", str(out)],
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", ".", "-w", str(out)],
+        cwd=src,
         capture_output=True,
         text=True,
         timeout=600,
