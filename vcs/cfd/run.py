@@ -352,7 +352,10 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     fallback_note = ""
     if averaged:
         latest = _latest_time(case_dir)  # the averaging stage wrote a time folder
-        means = _use_means(case_dir / latest) if latest and float(latest) > status["averaging_from"] else []
+        try:
+            means = _use_means(case_dir / latest) if latest and float(latest) > status["averaging_from"] else []
+        except OSError as exc:  # a field file that cannot be moved or written: reported below
+            means, latest = [], f"{latest} ({type(exc).__name__}: {exc})"
         if means == ["U", "p"]:
             run(["simpleFoam", "-postProcess", "-func", "wallShearStress", "-latestTime"], "wallShearStress")
             status["criterion_used"] = "pseudo_steady_time_average"
@@ -367,6 +370,8 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     else:
         status["criterion_used"] = "residualControl" if converged else "none"
     _collect(case_dir, status, logs, state)
+    if converged and not main["rows"] and main["converged_iterations"]:
+        status["iterations"] = int(main["converged_iterations"])  # the message's count, no row read
     if averaged:
         rel = status.get("averaging", {}).get("max_initial_residual")
         status["converged_relaxed"] = bool(rel is not None and rel < float(sol["relaxed_tolerance"]))
