@@ -323,7 +323,7 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         _collect(case_dir, status, logs, state)
         return finish(
             f"no SIMPLE iteration could be read from logs/log.simpleFoam ({main['time_lines']} time lines, "
-            "no residual lines): unrecognised solver output, convergence unknown; fallback not run",
+            "none with residuals): unrecognised solver output, convergence unknown; fallback not run",
             "simpleFoam",
         )
     converged = bool(main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
