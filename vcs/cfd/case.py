@@ -189,7 +189,10 @@ def render_case(
     cfd = deep_merge(DEFAULTS, cfd)
     flavour = flavour or cfd.get("flavour") or detect_openfoam()[0] or "esi"
     if flavour not in FLAVOURS:
-        raise VCSInputError(f"unknown OpenFOAM flavour {flavour!r}; known: {sorted(FLAVOURS)}")
+        raise VCSInputError(
+            f"OpenFOAM flavour {flavour!r} is not supported (supported: {', '.join(sorted(FLAVOURS))}); "
+            "install one of those or set cfd.flavour"
+        )
     cfd["flavour"] = flavour
     if cfd["inlet"]["type"] not in ("jet", "uniform", "parabolic"):
         raise VCSInputError(f"inlet.type must be jet, uniform or parabolic, not {cfd['inlet']['type']!r}")

@@ -1,7 +1,8 @@
 """Reading OpenFOAM's own files, dependency-light (used while a case runs):
 
 * ASCII ``constant/polyMesh`` reader for boundary patches (face centres / area vectors)
-* solver-log parser (initial residuals, continuity errors, convergence message)
+* solver-log parser (initial residuals, continuity errors, convergence message, time units of
+  openfoam.org 10+) and banner parser (both families, solver logs and ``-help``)
 * ``postProcessing/*/*.dat`` reader (surfaceFieldValue output)
 """
 
@@ -198,17 +199,142 @@ def patch_geometry(case_dir: Path | str, patch: str) -> tuple[NDArray[np.floatin
 
 
 # ----------------------------------------------------------------------- logs
+#
+# The lines read, and which OpenFOAM source prints them (openfoam.org 10 = OpenFOAM-10, ESI =
+# openfoam.com v1912 as packaged by Debian; the other versions print the same unless said):
+#
+# * time line, once per SIMPLE iteration: "Time = 12" (ESI, openfoam.org <= 9: runTime.timeName())
+#   or "Time = 12s" (openfoam.org 10, 11, 12: applications/solvers/incompressible/simpleFoam/
+#   simpleFoam.C prints runTime.userTimeName(), which src/OpenFOAM/db/Time/Time.C builds as
+#   timeName(userTimeValue()) + userTime_->unit(); the unit is "s" for the default realTime
+#   (src/OpenFOAM/db/Time/userTime/realTime/realTime.C) and "CAD" for engineTime). Any
+#   alphabetic unit ("s", "ms", "CAD") is accepted; deltaT = 1 makes the time the iteration.
+# * linear-solver line: "smoothSolver:  Solving for Ux, Initial residual = ..., Final residual =
+#   ..., No Iterations 2" (src/OpenFOAM/matrices/LduMatrix/LduMatrix/SolverPerformance.C, same in
+#   both flavours).
+# * "time step continuity errors : sum local = ..., global = ..., cumulative = ..."
+#   (src/finiteVolume/cfdTools/incompressible/continuityErrs.H).
+# * convergence: "SIMPLE solution converged in 129 iterations" (openfoam.org 10:
+#   src/finiteVolume/cfdTools/general/solutionControl/convergenceControl/convergenceControl/
+#   convergenceControl.C, converged(): algorithmName() + " solution converged in " +
+#   time().timeName() + " iterations" -- timeName(), so no unit here; ESI v1912 prints the same).
+# * "ExecutionTime = 4.02 s  ClockTime = 4 s" and the final "End" (simpleFoam.C).
+# * banner of a solver log: openfoam.org 10 (src/OpenFOAM/db/IOobject/IOobjectI.H writeBanner,
+#   argList.C): "   \\    /   O peration     | Website:  https://openfoam.org",
+#   "    \\  /    A nd           | Version:  10", "Build  : 10-c4cf895ad8fa"; ESI:
+#   "|  \\    /   O peration     | Version:  v1912 ... |", "| ... | Website:  www.openfoam.com |",
+#   "Build  : _9f29a8da7a-20191219 OPENFOAM=1912" (Debian: empty Version, "Build  : OPENFOAM=1912
+#   patch=200626").
+# * banner of "<solver> -help": openfoam.org (argList.C printUsage): "Using: OpenFOAM-10 (see
+#   https://openfoam.org)", "Build: 10-c4cf895ad8fa"; ESI: "Using: OpenFOAM-v2312 (2312) - visit
+#   www.openfoam.com" (Debian v1912: "Using: OpenFOAM- (1912) - visit www.openfoam.com",
+#   "Build:  (patch=200626)"); openfoam.org 11+ ship bin/simpleFoam as a script that prints
+#   "simpleFoam has been superseded ..." and runs "foamRun -solver incompressibleFluid".
 
+_FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _RES_RE = re.compile(
-    r"Solving for (\w+), Initial residual = ([-+0-9.eE]+), Final residual = ([-+0-9.eE]+), No Iterations (\d+)"
+    rf"Solving for (\w+), Initial residual = ({_FLOAT}), Final residual = ({_FLOAT}), No Iterations (\d+)"
 )
-_TIME_RE = re.compile(r"^Time = ([-+0-9.eE]+)\s*$")
+_TIME_RE = re.compile(rf"^Time = ({_FLOAT})\s*([A-Za-z]*)$")
 _CONT_RE = re.compile(
-    r"time step continuity errors : sum local = ([-+0-9.eE]+), global = ([-+0-9.eE]+), cumulative = ([-+0-9.eE]+)"
+    rf"time step continuity errors : sum local = ({_FLOAT}), global = ({_FLOAT}), cumulative = ({_FLOAT})"
 )
 _CONV_RE = re.compile(
     r"(SIMPLE solution converged in|reached convergence criteria|solution converged in)\D*(\d+)?", re.I
 )
+_CONV_ITER_RE = re.compile(rf"solution converged in\s+({_FLOAT})\s*[A-Za-z]*\s+iterations", re.I)
+_EXEC_RE = re.compile(rf"^ExecutionTime = ({_FLOAT}) s\s+ClockTime = ({_FLOAT}) s")
+_USING_ORG_RE = re.compile(r"Using:\s*OpenFOAM-(\S*)\s*\(see\s+(?:https?://)?(?:www\.)?openfoam\.org\)")
+_USING_COM_RE = re.compile(r"Using:\s*OpenFOAM-(\S*)\s*\((\d+)\)\s*-?\s*visit\s+(?:https?://)?www\.openfoam\.com")
+_BUILD_RE = re.compile(r"^Build\s*:[ \t]*([^\n]*?)[ \t]*$", re.M)
+_BOX_VERSION_RE = re.compile(r"^[| ].*\|\s*Version:[ \t]*([^\s|]+)", re.M)
+_BOX_WEBSITE_RE = re.compile(r"^[| ].*\|\s*Website:[ \t]*(\S+)", re.M)
+_API_RE = re.compile(r"OPENFOAM=(\d+)")
+_SUPERSEDED_RE = re.compile(r"(\w+) has been superseded")
+
+
+def family_of_version(version: str | None) -> str | None:
+    """The OpenFOAM family a version string belongs to, from its form alone.
+
+    Parameters
+    ----------
+    version : str or None
+        E.g. ``"v1912"``, ``"2312"`` or ``"com"`` (ESI, openfoam.com), ``"10"``, ``"12.1"`` or
+        ``"dev"`` (openfoam.org).
+
+    Returns
+    -------
+    str or None
+        ``"com"`` (ESI-OpenCFD), ``"org"`` (OpenFOAM Foundation) or None when the form says
+        nothing.
+    """
+    if not version:
+        return None
+    v = version.strip()
+    if re.match(r"^v?\d{4}\b", v) or v == "com":
+        return "com"
+    if re.match(r"^\d{1,2}(\.\d+)*$", v) or v == "dev":
+        return "org"
+    return None
+
+
+def parse_banner(text: str) -> dict[str, Any]:
+    """Family, version and build of OpenFOAM from a banner (solver log header or ``-help`` output).
+
+    Reads both families' banners (see the comment block above for the exact lines and the
+    OpenFOAM sources printing them). ESI versions are returned as ``"v<api>"`` when the API number
+    is known (Debian's v1912 prints an empty version).
+
+    Parameters
+    ----------
+    text : str
+        The banner, or a whole log (only its first 200 lines are read).
+
+    Returns
+    -------
+    dict
+        ``family``: ``"org"``, ``"com"`` or None; ``version``: str or None (``"10"``,
+        ``"dev"``, ``"v1912"``); ``api``: ESI API number (str) or None; ``build``: the Build
+        line's value or None; ``superseded``: name of a solver the installation replaced by a
+        script (openfoam.org 11+: ``"simpleFoam"``) or None.
+    """
+    head = "\n".join(text.splitlines()[:200])
+    out: dict[str, Any] = {"family": None, "version": None, "api": None, "build": None, "superseded": None}
+    m = _BUILD_RE.search(head)
+    if m:
+        out["build"] = m.group(1) or None
+    m = _SUPERSEDED_RE.search(head)
+    if m:
+        out["superseded"] = m.group(1)
+        out["family"] = "org"  # only openfoam.org 11+ replaces solvers by such scripts
+    m_org = _USING_ORG_RE.search(head)
+    m_com = _USING_COM_RE.search(head)
+    if m_org:
+        out["family"], out["version"] = "org", m_org.group(1) or None
+    elif m_com:
+        out["family"], out["api"] = "com", m_com.group(2)
+        out["version"] = m_com.group(1) or None
+    else:
+        m = _BOX_WEBSITE_RE.search(head)
+        if m and "openfoam.org" in m.group(1):
+            out["family"] = "org"
+        elif m and "openfoam.com" in m.group(1):
+            out["family"] = "com"
+        m = _BOX_VERSION_RE.search(head)
+        if m:
+            out["version"] = m.group(1)
+    if out["family"] == "com" or (out["family"] is None and out["build"] and _API_RE.search(out["build"])):
+        out["family"] = "com"
+        if out["api"] is None and out["build"]:
+            m = _API_RE.search(out["build"])
+            out["api"] = m.group(1) if m else None
+        if out["api"] and (not out["version"] or not re.match(r"^v?\d{4}$", out["version"])):
+            out["version"] = f"v{out['api']}"  # "OpenFOAM- (1912)", "OpenFOAM-com (2012)"
+        elif out["version"] and re.match(r"^\d{4}$", out["version"]):
+            out["version"] = f"v{out['version']}"
+    if out["family"] is None:
+        out["family"] = family_of_version(out["version"])
+    return out
 
 
 def parse_solver_log(path: str | Path) -> dict[str, Any]:
@@ -216,7 +342,9 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
 
     Initial residuals are those of the first solve per field and iteration (non-orthogonal
     correctors ignored); vectors give the max over components, as OpenFOAM's residualControl
-    does.
+    does. Time lines with a unit (openfoam.org 10+: ``Time = 12s``) and without one (ESI:
+    ``Time = 12``) are both read; see the comment block above for every line read and the
+    OpenFOAM source that prints it.
 
     Parameters
     ----------
@@ -226,21 +354,52 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``rows``: list of dicts, one per iteration with data: ``time`` (the iteration), initial
-        residuals by field (``p``, ``U``, ...; dimensionless), ``cont_local``, ``cont_global``,
-        ``cont_cumulative`` when logged; ``converged_message``: bool, whether the
-        residualControl convergence message was printed.
+        ``rows``: list of dicts, one per iteration with data: ``time`` (the iteration, the unit
+        stripped), initial residuals by field (``p``, ``U``, ...; dimensionless),
+        ``cont_local``, ``cont_global``, ``cont_cumulative`` when logged;
+        ``converged_message``: bool, whether the residualControl convergence message was
+        printed; ``converged_iterations``: the iteration count of that message (float) or None;
+        ``time_unit``: the unit of the time lines (``"s"``, ``"CAD"``; ``""`` without one, None
+        when no time line was read); ``time_lines``: number of time lines read; ``ended``:
+        whether the solver printed its final ``End``; ``execution_time_s``, ``clock_time_s``:
+        last ExecutionTime / ClockTime (s) or None; ``banner``: :func:`parse_banner` of the
+        log's header.
     """
     rows: list[dict[str, Any]] = []
     cur: dict[str, Any] | None = None
     converged_msg = False
+    conv_iter: float | None = None
+    unit: str | None = None
+    n_time = 0
+    ended = False
+    exec_s: float | None = None
+    clock_s: float | None = None
+    head: list[str] = []
     with open(path, errors="replace") as fh:
         for line in fh:
             line = line.rstrip("\n")
-            m = _TIME_RE.match(line.strip())
+            if len(head) < 200:
+                head.append(line)
+            s = line.strip()
+            m = _TIME_RE.match(s)
             if m:
                 cur = {"time": float(m.group(1))}
                 rows.append(cur)
+                unit = m.group(2) if unit is None else unit
+                n_time += 1
+                continue
+            if s == "End":
+                ended = True
+                continue
+            m = _EXEC_RE.match(s)
+            if m:
+                exec_s, clock_s = float(m.group(1)), float(m.group(2))
+                continue
+            if _CONV_RE.search(line):
+                converged_msg = True
+                m = _CONV_ITER_RE.search(line)
+                if m:
+                    conv_iter = float(m.group(1))
                 continue
             if cur is None:
                 continue
@@ -257,13 +416,20 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
             m = _CONT_RE.search(line)
             if m:
                 cur["cont_local"], cur["cont_global"], cur["cont_cumulative"] = (float(g) for g in m.groups())
-                continue
-            if _CONV_RE.search(line):
-                converged_msg = True
     for r in rows:
         r.pop("_seen", None)
     rows = [r for r in rows if len(r) > 1]
-    return {"rows": rows, "converged_message": converged_msg}
+    return {
+        "rows": rows,
+        "converged_message": converged_msg,
+        "converged_iterations": conv_iter,
+        "time_unit": unit,
+        "time_lines": n_time,
+        "ended": ended,
+        "execution_time_s": exec_s,
+        "clock_time_s": clock_s,
+        "banner": parse_banner("\n".join(head)),
+    }
 
 
 # -------------------------------------------------------------- postProcessing

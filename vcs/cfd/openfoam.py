@@ -5,6 +5,11 @@ Flavours: ``"esi"`` (openfoam.com, tested with Debian's v1912) and ``"org10"`` (
 dictionaries checked against the OpenFOAM-10 sources). Both are rendered from
 ``templates/openfoam/common`` plus the flavour's override directory, driven by the single table
 ``FLAVOURS`` below; nothing else in the package depends on the flavour.
+
+Detection (:func:`detect_openfoam`, :func:`openfoam_installation`) needs no sourced environment:
+the banner of ``simpleFoam -help``, ``$WM_PROJECT_VERSION``, the installation's files and dpkg
+are read, and it never raises. openfoam.org 11 and later (``foamRun -solver
+incompressibleFluid``) are detected as ``"org11"``, ``"org12"``, ... and not supported.
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from vcs.cfd.foamfiles import family_of_version, parse_banner
 
 # --------------------------------------------------------------------------- parameters
 
@@ -176,48 +183,196 @@ def foam_env() -> dict[str, str]:
     return env
 
 
+def flavour_of(family: str | None, version: str | None) -> str | None:
+    """The case flavour for an OpenFOAM family and version.
+
+    Parameters
+    ----------
+    family : str or None
+        ``"com"`` (ESI-OpenCFD, openfoam.com), ``"org"`` (OpenFOAM Foundation, openfoam.org) or
+        None (taken from the version's form, :func:`vcs.cfd.foamfiles.family_of_version`).
+    version : str or None
+        E.g. ``"v1912"``, ``"10"``, ``"12"``, ``"dev"``.
+
+    Returns
+    -------
+    str or None
+        ``"esi"`` for any openfoam.com version; ``"org<N>"`` for openfoam.org N (``"org10"`` is
+        the supported one: 11 and later replaced simpleFoam by ``foamRun``, so they get their
+        own, unsupported, name); ``"orgdev"`` for the development line; ``"org"`` when the
+        openfoam.org version is unknown; None when the family is unknown.
+    """
+    family = family or family_of_version(version)
+    if family == "com":
+        return "esi"
+    if family != "org":
+        return None
+    m = re.match(r"^(\d+)", version or "")
+    if m:
+        return f"org{int(m.group(1))}"
+    word = re.sub(r"[^A-Za-z0-9]", "", version or "")
+    return f"org{word}" if word else "org"
+
+
+def _run_text(cmd: list[str], timeout: float = 30.0) -> str:
+    """stdout + stderr of a command, or "" when it cannot run (never raises)."""
+    try:
+        r = subprocess.run(cmd, env=foam_env(), capture_output=True, text=True, errors="replace", timeout=timeout)
+        return (r.stdout or "") + "\n" + (r.stderr or "")
+    except Exception:  # noqa: BLE001 - detection must never fail
+        return ""
+
+
+def _project_dirs(executable: str | None) -> list[Path]:
+    """Candidate installation folders: $WM_PROJECT_DIR (Debian's default) and the one holding
+    ``executable`` (``<dir>/platforms/<arch>/bin/simpleFoam`` or ``<dir>/bin/simpleFoam``)."""
+    out: list[Path] = []
+    env_dir = foam_env().get("WM_PROJECT_DIR")
+    if env_dir:
+        out.append(Path(env_dir))
+    if executable:
+        try:
+            exe = Path(executable).resolve()
+            if exe.parent.name == "bin" and len(exe.parents) > 3 and exe.parents[2].name == "platforms":
+                out.append(exe.parents[3])
+            elif exe.parent.name == "bin":
+                out.append(exe.parents[1])
+        except (OSError, RuntimeError):
+            pass
+    return [d for i, d in enumerate(out) if d not in out[:i]]
+
+
+def _files_facts(project_dir: Path) -> tuple[str | None, str | None]:
+    """(family, version) from an installation's files: ESI's ``META-INFO/api-info`` (``api=2312``)
+    and ``etc/bashrc`` (``export WM_PROJECT_VERSION=...`` and the website in its header)."""
+    family: str | None = None
+    version: str | None = None
+    try:
+        api = project_dir / "META-INFO" / "api-info"
+        if api.is_file():
+            m = re.search(r"^api=(\d+)", api.read_text(errors="replace"), re.M)
+            if m:
+                family, version = "com", f"v{m.group(1)}"
+        bashrc = project_dir / "etc" / "bashrc"
+        if bashrc.is_file():
+            txt = bashrc.read_text(errors="replace")
+            if "openfoam.org" in txt[:2000]:
+                family = family or "org"
+            elif "openfoam.com" in txt[:2000]:
+                family = family or "com"
+            m = re.search(r"^\s*export\s+WM_PROJECT_VERSION=['\"]?([\w.-]+)", txt, re.M)
+            if m and version is None:
+                version = m.group(1)
+    except (OSError, ValueError):
+        pass
+    return family or family_of_version(version), version
+
+
+def _dpkg_facts() -> tuple[str | None, str | None, str | None]:
+    """(family, version, package) of an installed OpenFOAM Debian package: Debian's ``openfoam``
+    (ESI; version ``1912.200626-1+b1``), openfoam.com's ``openfoam2312``, openfoam.org's
+    ``openfoam10`` / ``openfoam-dev``."""
+    if not shutil.which("dpkg-query"):
+        return None, None, None
+    txt = _run_text(["dpkg-query", "-W", "-f=${Package}\t${Version}\t${db:Status-Abbrev}\n", "openfoam*"], 20.0)
+    for line in txt.splitlines():
+        parts = line.split("\t")
+        if len(parts) < 3 or not parts[2].startswith("ii"):
+            continue
+        pkg, ver = parts[0].strip(), parts[1].strip()
+        if pkg == "openfoam":
+            m = re.match(r"^(?:\d+:)?v?(\d{4})", ver)
+            return "com", (f"v{m.group(1)}" if m else ver), pkg
+        m = re.match(r"^openfoam(\d{4})$", pkg)
+        if m:
+            return "com", f"v{m.group(1)}", pkg
+        m = re.match(r"^openfoam(\d{1,2}|-dev)$", pkg)
+        if m:
+            return "org", m.group(1).lstrip("-"), pkg
+    return None, None, None
+
+
 @lru_cache(maxsize=1)
+def openfoam_installation() -> dict[str, Any]:
+    """Everything known about the installed OpenFOAM, from every source; never raises.
+
+    Sources, in order of trust: the banner of ``simpleFoam -help`` (the executable that
+    :func:`vcs.cfd.run.run_case` runs; openfoam.org 11+ ship a ``simpleFoam`` script that runs
+    ``foamRun``, whose banner is read the same way), ``$WM_PROJECT_VERSION``, the installation's
+    files (``$WM_PROJECT_DIR`` or the folder holding simpleFoam: ``META-INFO/api-info``,
+    ``etc/bashrc``), dpkg. The family (openfoam.com / openfoam.org) is that of the first source
+    that tells it; the version that of the first source of the same family. No sourced
+    environment is needed. ``$VCSFLOW_OPENFOAM_FLAVOUR`` forces the flavour (the version is still
+    detected). Cached for the process (``openfoam_installation.cache_clear()``).
+
+    Returns
+    -------
+    dict
+        ``flavour`` (see :func:`flavour_of`; the forced value when set), ``family``, ``version``,
+        ``build`` (str or None each), ``executable`` (path of simpleFoam or None), ``forced``
+        (bool), ``sources``: list of {``source``, ``family``, ``version``} for every source
+        that said something, ``notes``: list of str.
+    """
+    info: dict[str, Any] = {
+        "flavour": None,
+        "family": None,
+        "version": None,
+        "build": None,
+        "executable": None,
+        "forced": False,
+        "sources": [],
+        "notes": [],
+    }
+    facts: list[dict[str, Any]] = []
+    try:
+        exe = shutil.which("simpleFoam")
+        info["executable"] = exe
+        if exe:
+            b = parse_banner(_run_text([exe, "-help"], 60.0))
+            info["build"] = b["build"]
+            if b["superseded"]:
+                info["notes"].append(
+                    f"{b['superseded']} is a script that runs foamRun (openfoam.org 11+): not supported, use 10"
+                )
+            facts.append({"source": "simpleFoam -help", "family": b["family"], "version": b["version"]})
+        wmv = os.environ.get("WM_PROJECT_VERSION", "").strip()
+        if wmv:
+            facts.append({"source": "$WM_PROJECT_VERSION", "family": family_of_version(wmv), "version": wmv})
+        for d in _project_dirs(exe):
+            fam, ver = _files_facts(d)
+            if fam or ver:
+                facts.append({"source": str(d), "family": fam, "version": ver})
+        fam, ver, pkg = _dpkg_facts()
+        if fam or ver:
+            facts.append({"source": f"dpkg {pkg}", "family": fam, "version": ver})
+    except Exception as exc:  # noqa: BLE001 - detection must never fail
+        info["notes"].append(f"detection stopped early: {type(exc).__name__}: {exc}")
+    info["sources"] = [f for f in facts if f["family"] or f["version"]]
+    family = next((f["family"] for f in facts if f["family"]), None)
+    version = next((f["version"] for f in facts if f["version"] and f["family"] in (None, family)), None)
+    info["family"], info["version"] = family, version
+    info["flavour"] = flavour_of(family, version)
+    forced = os.environ.get("VCSFLOW_OPENFOAM_FLAVOUR", "").strip()
+    if forced:
+        info["flavour"], info["forced"] = forced, True
+    return info
+
+
 def detect_openfoam() -> tuple[str | None, str | None]:
     """(flavour, version) of the installed OpenFOAM, or (None, None) when none is found.
 
-    Order: $VCSFLOW_OPENFOAM_FLAVOUR, $WM_PROJECT_VERSION, the banner of ``simpleFoam -help``
-    (openfoam.com vs openfoam.org), dpkg's version of the ``openfoam`` package. The result is
-    cached for the process.
+    See :func:`openfoam_installation` for the sources (banner of ``simpleFoam -help``,
+    $WM_PROJECT_VERSION, the installation's files, dpkg; no sourced environment needed) and the
+    $VCSFLOW_OPENFOAM_FLAVOUR override. Never raises; cached for the process (clear with
+    ``openfoam_installation.cache_clear()``).
 
     Returns
     -------
     flavour : str or None
-        ``"esi"``, ``"org10"`` (openfoam.org 10 or later), ``"org<N>"`` for older openfoam.org,
-        the forced value, or None.
+        ``"esi"``, ``"org10"``, another ``"org<N>"`` / ``"orgdev"`` (not supported by the
+        templates), the forced value, or None.
     version : str or None
-        The version string found, or None.
+        The version string found (``"v1912"``, ``"10"``, ``"dev"``), or None.
     """
-    forced = os.environ.get("VCSFLOW_OPENFOAM_FLAVOUR")
-    wmv = os.environ.get("WM_PROJECT_VERSION")
-    version = wmv
-    banner = ""
-    if shutil.which("simpleFoam"):
-        try:
-            banner = subprocess.run(
-                ["simpleFoam", "-help"], env=foam_env(), capture_output=True, text=True, timeout=60
-            ).stdout
-        except (OSError, subprocess.SubprocessError):
-            banner = ""
-    if version is None:
-        m = re.search(r"Using:\s*OpenFOAM-\S*\s*\(([^)]+)\)", banner) or re.search(r"Version:\s*(\S+)", banner)
-        if m:
-            version = m.group(1)
-    if version is None and shutil.which("dpkg-query"):
-        r = subprocess.run(["dpkg-query", "-W", "-f=${Version}", "openfoam"], capture_output=True, text=True)
-        if r.returncode == 0 and r.stdout.strip():
-            version = r.stdout.strip()
-    if forced:
-        return forced, version
-    if "openfoam.com" in banner or (version and re.match(r"v?\d{4}", version)):
-        return "esi", version
-    if "openfoam.org" in banner or (version and re.match(r"\d{1,2}(\.\d+)?$", version)):
-        # known gap, left as it was: a version not starting with digits (e.g. "dev" with an
-        # openfoam.org banner) makes re.match None and raises AttributeError here
-        major = int(re.match(r"(\d+)", version).group(1)) if version else 10  # type: ignore[union-attr]
-        return ("org10" if major >= 10 else f"org{major}"), version
-    return None, version
+    info = openfoam_installation()
+    return info["flavour"], info["version"]

@@ -12,7 +12,7 @@ import shutil
 import subprocess
 import time
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,7 +36,8 @@ class _Runner:
         self.env = foam_env()
 
     def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess[bytes]:
-        """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9."""
+        """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9,
+        an executable that cannot be started 127 (never raises)."""
         cmd = list(args)
         if ranks > 1:
             mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
@@ -57,6 +58,9 @@ class _Runner:
             except subprocess.TimeoutExpired:
                 r = subprocess.CompletedProcess(cmd, returncode=-9)
                 fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
+            except OSError as exc:  # e.g. the utility is not on PATH: a failed utility, not a crash
+                r = subprocess.CompletedProcess(cmd, returncode=127)
+                fh.write(f"\n--> FOAM FATAL ERROR: vcsflow could not start {cmd[0]}: {exc}\n")
         self.timings[log] = round(self.timings.get(log, 0.0) + time.perf_counter() - t0, 3)
         return r
 
@@ -133,15 +137,46 @@ def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
         pass
 
 
-def _use_means(time_dir: Path) -> None:
-    """Fallback: replace U and p by their fieldAverage means (instantaneous kept as *.instantaneous)."""
+def _use_means(time_dir: Path) -> list[str]:
+    """Fallback: replace U and p by their fieldAverage means (instantaneous kept as *.instantaneous).
+
+    Parameters
+    ----------
+    time_dir : Path
+        The time folder written by the averaging stage.
+
+    Returns
+    -------
+    list of str
+        The fields replaced (``"U"``, ``"p"``); a field without its ``<f>Mean`` file is left as
+        it is.
+    """
+    done = []
     for f in ("U", "p"):
         mean = time_dir / f"{f}Mean"
-        if mean.exists():
+        if mean.exists() and (time_dir / f).exists():
             shutil.move(time_dir / f, time_dir / f"{f}.instantaneous")
             txt = mean.read_text()
             txt = re.sub(rf"(object\s+){f}Mean;", rf"\1{f};", txt, count=1)
             (time_dir / f).write_text(txt)
+            done.append(f)
+    return done
+
+
+def _log_summary(parsed: dict[str, Any], log: Path) -> dict[str, Any]:
+    """What status.json keeps of a parsed solver log (see :func:`parse_solver_log`)."""
+    return {
+        "log": log.name,
+        "time_lines": parsed["time_lines"],
+        "time_unit": parsed["time_unit"],
+        "iterations_read": len(parsed["rows"]),
+        "converged_message": parsed["converged_message"],
+        "converged_iterations": parsed["converged_iterations"],
+        "ended": parsed["ended"],
+        "execution_time_s": parsed["execution_time_s"],
+        "clock_time_s": parsed["clock_time_s"],
+        "banner": parsed["banner"],
+    }
 
 
 def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any]:
@@ -151,7 +186,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     [decomposePar], simpleFoam start-up (first order) then main stage (residualControl);
     if not converged and solver.fallback == 'average': averaging stage with fieldAverage whose
     means replace U and p; [reconstructPar]; wallShearStress. Failures do not raise: they are
-    reported in the status (``reason``, ``failed_log``).
+    reported in the status (``reason``, ``failed_log``); nothing raises for a failed,
+    unreadable or not converged run, with or without the fallback. Solver logs of both families
+    are read (openfoam.org 10 prints ``Time = 12s``, ESI ``Time = 12``).
 
     Parameters
     ----------
@@ -166,7 +203,10 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         The status (also ``status.json``): ``converged``, ``reason``, ``iterations``,
         ``final_residuals``, ``cells``, ``mass_imbalance`` (relative), ``flow_rates`` (m^3/s),
         ``patch_pressure`` (kinematic, m^2/s^2), ``pressure_drop`` (m^2/s^2 and Pa),
-        ``wall_shear_stress_Pa``, ``timings_s`` (s), the inlet profile summary and more.
+        ``wall_shear_stress_Pa``, ``timings_s`` (s), the inlet profile summary, ``solver_log``
+        (the main stage's log: time unit, convergence message and its count, ``End`` reached,
+        execution/clock time in s, the banner's family/version/build), ``pyfoam_log_analysis``
+        (PyFoam's reading of the last log and whether it agrees with the own parser) and more.
     """
     case_dir = Path(case_dir).resolve()
     state = json.loads((case_dir / CASE_JSON).read_text())
@@ -272,12 +312,21 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     r = run(["simpleFoam"], "simpleFoam", ranks)
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = parse_solver_log(logs[-1])
+    status["solver_log"] = _log_summary(main, logs[-1])
     if r.returncode != 0:
         _collect(case_dir, status, logs, state)
         return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
     last = main["rows"][-1] if main["rows"] else {}
     tol = float(sol["tolerance"])
-    converged = bool(last) and (main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
+    if not last and not main["converged_message"]:
+        # nothing to judge convergence on, and nothing to start an average from: say so
+        _collect(case_dir, status, logs, state)
+        return finish(
+            f"no SIMPLE iteration could be read from logs/log.simpleFoam ({main['time_lines']} time lines, "
+            "none with residuals): unrecognised solver output, convergence unknown; fallback not run",
+            "simpleFoam",
+        )
+    converged = bool(main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
     status["converged"] = converged
     averaged = False
     if not converged:
@@ -300,24 +349,41 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
             return finish(
                 (status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed", "reconstructPar"
             )
+    fallback_note = ""
     if averaged:
-        tdir = case_dir / cast(str, _latest_time(case_dir))  # the averaging stage wrote a time folder
-        _use_means(tdir)
-        run(["simpleFoam", "-postProcess", "-func", "wallShearStress", "-latestTime"], "wallShearStress")
-        status["criterion_used"] = "pseudo_steady_time_average"
+        latest = _latest_time(case_dir)  # the averaging stage wrote a time folder
+        try:
+            means = _use_means(case_dir / latest) if latest and float(latest) > status["averaging_from"] else []
+        except OSError as exc:  # a field file that cannot be moved or written: reported below
+            means, latest = [], f"{latest} ({type(exc).__name__}: {exc})"
+        if means == ["U", "p"]:
+            run(["simpleFoam", "-postProcess", "-func", "wallShearStress", "-latestTime"], "wallShearStress")
+            status["criterion_used"] = "pseudo_steady_time_average"
+        else:  # no means to report: the fields stay the instantaneous ones, and the status says so
+            averaged = False
+            status["criterion_used"] = "none"
+            fallback_note = (
+                f"; fallback: the averaging stage wrote no UMean/pMean (latest time {latest}), "
+                "U and p are the instantaneous fields of the last iteration"
+            )
         status["average_iterations"] = int(sol["average_iterations"])
     else:
         status["criterion_used"] = "residualControl" if converged else "none"
     _collect(case_dir, status, logs, state)
+    if converged and not main["rows"] and main["converged_iterations"]:
+        status["iterations"] = int(main["converged_iterations"])  # the message's count, no row read
     if averaged:
         rel = status.get("averaging", {}).get("max_initial_residual")
         status["converged_relaxed"] = bool(rel is not None and rel < float(sol["relaxed_tolerance"]))
-        status["reason"] += (
+        rel_txt = f"{rel:.3g}" if rel is not None else "unknown (no iteration read from logs/log.simpleFoam.average)"
+        fallback_note = (
             f"; fallback: U and p are the time averages over the last {sol['average_iterations']} "
-            f"iterations (pseudo-steady), max residual during averaging {rel:.3g} "
+            f"iterations (pseudo-steady), max residual during averaging {rel_txt} "
             f"(relaxed criterion {sol['relaxed_tolerance']:g}: "
             f"{'met' if status['converged_relaxed'] else 'not met'})"
         )
+    if fallback_note:
+        status["reason"] = (status["reason"] or "") + fallback_note
     return finish()
 
 
@@ -347,8 +413,25 @@ def _solver_failure(log: Path, stage: str) -> str:
     return f"simpleFoam ({stage}) exited with an error (see logs/{log.name})"
 
 
-def _pyfoam_check(log: Path) -> dict[str, Any] | None:
-    """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration)."""
+def _pyfoam_check(log: Path, own: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration).
+
+    Parameters
+    ----------
+    log : Path
+        A solver log.
+    own : dict or None
+        The own parser's last row of that log (``time`` and initial residuals), to compare with.
+
+    Returns
+    -------
+    dict
+        ``log``, ``last_iteration`` (float or None), ``initial_residuals`` (PyFoam's names:
+        ``Ux``, ``p``, ...), ``continuity``; ``agrees_with_parser`` (bool, when ``own`` is given:
+        same last iteration and p residual within 1e-6 relative); ``note`` when PyFoam read no
+        time line (e.g. a time unit its regular expression does not accept); ``error`` (and
+        nothing else) when PyFoam failed.
+    """
     try:
         from PyFoam.LogAnalysis.BoundingLogAnalyzer import BoundingLogAnalyzer
 
@@ -357,14 +440,33 @@ def _pyfoam_check(log: Path) -> dict[str, Any] | None:
             a.analyze(fh)
         lin = a.getAnalyzer("Linear").getCurrentData()
         cont = a.getAnalyzer("Continuity").getCurrentData()
-        return {
+        try:  # PyFoam gives the time as a string, "" when it read no time line
+            t: float | None = float(a.getTime())
+        except (TypeError, ValueError):
+            t = None
+        out: dict[str, Any] = {
             "log": log.name,
-            "last_iteration": float(a.getTime()),
+            "last_iteration": t,
             "initial_residuals": {k: v for k, v in lin.items() if "_" not in k},
             "continuity": cont,
         }
     except Exception as exc:  # noqa: BLE001 - optional cross-check only
-        return {"error": f"{type(exc).__name__}: {exc}"}
+        return {"log": log.name, "error": f"{type(exc).__name__}: {exc}"}
+    if out["last_iteration"] is None:
+        unit = parse_solver_log(log)["time_unit"]
+        out["note"] = (
+            f"PyFoam's analyzer read no time line of {log.name} (time unit {unit!r}); "
+            "its residuals cannot be tied to an iteration"
+        )
+    if own:
+        p_own, p_pf = own.get("p"), out["initial_residuals"].get("p")
+        out["agrees_with_parser"] = bool(
+            out["last_iteration"] == own.get("time")
+            and p_own is not None
+            and p_pf is not None
+            and abs(float(p_pf) - float(p_own)) <= 1e-6 * max(abs(float(p_own)), 1e-300)
+        )
+    return out
 
 
 def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: dict[str, Any]) -> None:
@@ -392,7 +494,9 @@ def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: di
                 if avg_rows
                 else None
             }
-    status["pyfoam_log_analysis"] = _pyfoam_check(logs[-1]) if logs else None
+    last_log = [lg for lg in logs if lg.exists()][-1:]
+    own_last = parse_solver_log(last_log[0])["rows"][-1:] if last_log else []
+    status["pyfoam_log_analysis"] = _pyfoam_check(last_log[0], own_last[0] if own_last else None) if last_log else None
     rho = float(state["cfd"]["physics"]["rho"])
     avg_from = status.get("averaging_from")
 
