@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline
 
-from vcs import coords as _coords
+import vcs.coords as _coords
 from vcs.centerline import (
     VoxelLumen,
     curve_length,

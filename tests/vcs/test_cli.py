@@ -152,3 +152,22 @@ def test_inputs_are_never_overwritten(tube_stl, tmp_path):
     r = run("coords", tmp_path / "f" / "model.json", pts, "-o", pts)
     assert r.returncode == 2 and "also an input" in r.stderr
     assert pts.read_text() == "x,y,z\n0,0,30\n"
+
+
+def test_output_checks_of_grid_sensitivity_phantom(tube_stl, tmp_path):
+    """Bad -o for `vcs grid`, `vcs sensitivity` and `vcs phantom`: one line, exit 2, nothing written
+    (regressions: an internal error after the whole sweep; --params overwriting the STL)."""
+    run("fit", tube_stl, "-o", tmp_path / "f", "--units", "mm")
+    model = tmp_path / "f" / "model.json"
+    r = run("grid", model, "-o", tmp_path / "g.json")
+    assert r.returncode == 2 and "must end in .vtu" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "g.json").exists()
+    r = run("grid", model, "-o", model)
+    assert r.returncode == 2 and "also an input" in r.stderr
+    (tmp_path / "file").write_text("x")
+    r = run("sensitivity", tube_stl, "--L", "9:9:1", "--K", "7:7:1", "--R", "7:7:1", "-o", tmp_path / "file")
+    assert r.returncode == 2 and "not a directory" in r.stderr, r.stderr
+    assert (tmp_path / "file").read_text() == "x"
+    stl = tmp_path / "p.stl"
+    r = run("phantom", "--kind", "tube", "-o", stl, "--params", stl)
+    assert r.returncode == 2 and "--params" in r.stderr and not stl.exists()
