@@ -338,7 +338,7 @@ def fit_vessel(
     inlet_cap: Path | str | None = None,
     outlet_cap: Path | str | None = None,
     cap_array: str | None = "auto",
-    L: int = 9,
+    L: int | str = "auto",
     K: int | None = 19,
     R: int | None = 15,
     recentre_iterations: int = 3,
@@ -361,8 +361,10 @@ def fit_vessel(
         Cap surface files, in the mesh's units; give both or neither.
     cap_array : str or None
         Cell array labelling the caps; ``"auto"`` tries the usual names, None disables.
-    L : int
-        Interior knots of the centerline c(tau).
+    L : int or "auto"
+        Interior knots of the centerline c(tau); "auto" (default) picks the smallest L >= 9 that
+        keeps the curve inside the lumen with a margin and tau the arc length within 2 %
+        (:func:`vcs.centerline.choose_n_knots`).
     K, R : int or None
         Interior knots of the wall model in tau and theta; None for no wall model.
     recentre_iterations : int
@@ -449,7 +451,8 @@ def fit_vessel(
         "ends_method": ends.method,
         "inlet_center_mm": report["inlet"]["center_mm"],
         "outlet_center_mm": report["outlet"]["center_mm"],
-        "L": int(L),
+        "L": int(report["L"]),
+        "L_source": report["L_source"],
     }
     model = VesselModel(vcs, None if wall_fit is None else wall_fit.model, surf.units, meta)
     return model, report, wall_fit
