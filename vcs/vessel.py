@@ -107,6 +107,47 @@ class VesselModel:
             wall = template.wall.with_coefficients(a[n_c:].reshape(template.wall.coefficients.shape))
         return cls(vcs, wall, template.units, dict(template.meta))
 
+    @property
+    def n_knots(self) -> int:
+        """L, the centerline's number of uniform interior knots."""
+        return int(len(self.vcs.curve.t) - 2 * (self.vcs.curve.k + 1))
+
+    def with_n_knots(self, L: int) -> VesselModel:
+        """The same vessel with its centerline refitted with ``L`` knots (the wall model is kept).
+
+        An atlas needs one L for every patient (paper Section 2.3.1: one feature vector layout).
+        The curve is refitted by least squares to 4,001 of its own points equally spaced in tau
+        (= arc length), with the same end points and end tangents, and re-parametrised by arc
+        length (:func:`vcs.centerline.fit_centerline`, Eq. 1); v1(0) is transported onto the new
+        t(0). Raising L changes the curve by microns (measured in the README), so (tau, theta,
+        rho) and rho_w(tau, theta) keep their meaning.
+
+        Parameters
+        ----------
+        L : int
+            New number of interior knots (>= 1).
+
+        Returns
+        -------
+        VesselModel
+            ``meta`` records the original L as ``L_fitted``.
+        """
+        from vcs.centerline import fit_centerline
+
+        if L == self.n_knots:
+            return self
+        c = self.vcs.curve
+        tau = np.linspace(0.0, 1.0, 4001)
+        d = c.derivative()(np.array([0.0, 1.0]))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        curve = fit_centerline(c(tau), int(L), end_directions=(d[0], d[1]))
+        t0 = curve.derivative()(0.0)
+        t0 = t0 / np.linalg.norm(t0)
+        v = self.vcs.v1_0 - (self.vcs.v1_0 @ t0) * t0
+        vcs = VesselCoordinateSystem(curve, v / np.linalg.norm(v), v1_0_from=self.vcs.v1_0_from)
+        meta = {**self.meta, "L": int(L), "L_fitted": int(self.meta.get("L_fitted", self.n_knots))}
+        return VesselModel(vcs, self.wall, self.units, meta)
+
     # -- geometry -----------------------------------------------------------------------------
     def fitted_wall(self) -> WallModel:
         """The wall model rho_w (Eq. 5); VCSInputError when the model has none (a centerline-only
