@@ -7,6 +7,7 @@
 flipped at random (seed 0); both repair it; prints the best of 3 times and checks that both
 give a consistently wound mesh. Why the project keeps its own repair (README, dependencies).
 """
+
 from __future__ import annotations
 
 import sys

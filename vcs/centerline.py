@@ -579,8 +579,10 @@ def _lsq_fixed_ends(
         hi = n - 2
     free = np.zeros((hi - lo, 3, n, 3))
     free[np.arange(hi - lo)[:, None], np.arange(3)[None, :], np.arange(lo, hi)[:, None], np.arange(3)[None, :]] = 1.0
-    G = np.concatenate([np.stack(cols, axis=-1), free.reshape(-1, n, 3).transpose(1, 2, 0)], axis=-1) if cols else (
-        free.reshape(-1, n, 3).transpose(1, 2, 0)
+    G = (
+        np.concatenate([np.stack(cols, axis=-1), free.reshape(-1, n, 3).transpose(1, 2, 0)], axis=-1)
+        if cols
+        else (free.reshape(-1, n, 3).transpose(1, 2, 0))
     )  # (n, 3, nz)
     # normal equations through the n x n Gram matrices (B^T B and the penalty's D^T D): the cost
     # does not grow with the number of data points beyond one sparse product
@@ -1133,10 +1135,10 @@ def recentre_step(
     y = np.zeros((n_bins, 5))
     np.add.at(A, b, Xw[:, :, None] * X[:, None, :])
     np.add.at(y, b, Xw * rho[:, None])
-    yy = np.bincount(b, w * ok * rho**2, minlength=n_bins)
-    tsum = np.bincount(b, w * ok, minlength=n_bins)
+    yy: NDArray[np.float64] = np.bincount(b, w * ok * rho**2, minlength=n_bins).astype(float)
+    tsum: NDArray[np.float64] = np.bincount(b, w * ok, minlength=n_bins).astype(float)
     tmean = np.bincount(b, w * ok * tau, minlength=n_bins) / np.where(tsum > 0, tsum, 1)
-    cnt = np.bincount(b, ok.astype(float), minlength=n_bins)
+    cnt: NDArray[np.float64] = np.bincount(b, ok.astype(float), minlength=n_bins).astype(float)
     # a bin votes only when its wall points surround the curve (all 8 theta octants present):
     # bins cut by an oblique end plane or a gap would give a biased centre
     octant = np.minimum((theta / (np.pi / 4)).astype(int), 7)
@@ -1144,9 +1146,13 @@ def recentre_step(
     cover[b[ok], octant[ok]] = 1.0
     half = int(np.ceil(0.5 * window_mm * n_bins / max(curve_length(curve), 1e-9) - 0.5))
     if half > 0:  # pool the sums of the 2 half + 1 bins around each bin
-        A, y, cover, yy = (_window_sum(a, half) for a in (A, y, cover, yy))
+        A = _window_sum(A, half)
+        y = _window_sum(y, half)
+        cover = _window_sum(cover, half)
+        yy = _window_sum(yy.astype(float), half)
         tw = _window_sum(tmean * tsum, half)
-        tsum, cnt = _window_sum(tsum, half), _window_sum(cnt, half)
+        tsum = _window_sum(tsum.astype(float), half)
+        cnt = _window_sum(cnt.astype(float), half)
         tmean = tw / np.where(tsum > 0, tsum, 1)
     good = (cnt >= 12) & (cover > 0).all(axis=1)
     good[good] &= np.linalg.cond(A[good]) < 1e8
@@ -1204,7 +1210,7 @@ def group_median(groups: NDArray[np.integer], values: NDArray[np.floating], n_gr
     return out
 
 
-def _window_sum(a: NDArray[np.floating], half: int) -> NDArray[np.floating]:
+def _window_sum(a: NDArray[np.float64], half: int) -> NDArray[np.float64]:
     """Sums of ``a`` over the window of bins [i - half, i + half] along its first axis (clipped at the ends).
 
     Parameters

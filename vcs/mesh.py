@@ -116,7 +116,9 @@ def vertex_normals(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
-def point_triangle_distance(points: ArrayLike, tris: NDArray[np.floating], chunk: int = 2_000_000) -> NDArray[np.floating]:
+def point_triangle_distance(
+    points: ArrayLike, tris: NDArray[np.floating], chunk: int = 2_000_000
+) -> NDArray[np.floating]:
     """Exact Euclidean distance from each point to the nearest of the triangles (brute force).
 
     Closest point on a triangle by the Voronoi regions of its vertices, edges and face

@@ -151,7 +151,9 @@ class VesselCoordinateSystem:
         t_recentre = time.perf_counter()
         choice = None
         if auto:
-            choice = choose_n_knots(data, lumen, working, end_directions=dirs, max_knots=max(9, min(L_work, len(data) // 2)))
+            choice = choose_n_knots(
+                data, lumen, working, end_directions=dirs, max_knots=max(9, min(L_work, len(data) // 2))
+            )
             curve = choice.curve
         else:
             curve = fit_centerline(data, int(n_knots), end_directions=dirs)

@@ -595,9 +595,10 @@ def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) 
     if not report["centerline_inside_lumen"]:
         why.append(f"the centerline leaves the lumen (minimum wall distance {d:.3f} mm); use more knots (--L auto)")
     elif report["centerline_min_wall_distance_ratio"] < lim["min_centerline_wall_distance_ratio"]:
+        pct = 100 * report["centerline_min_wall_distance_ratio"]
         why.append(
-            f"the centerline touches the wall: it comes within {100 * report['centerline_min_wall_distance_ratio']:.0f} % "
-            f"of the local lumen radius of it (minimum wall distance {d:.3f} mm)"
+            f"the centerline touches the wall: it comes within {pct:.0f} % of the local lumen radius of it "
+            f"(minimum wall distance {d:.3f} mm)"
         )
     dev = report["arc_length_speed_deviation"]
     if dev > lim["max_arc_length_speed_deviation"]:

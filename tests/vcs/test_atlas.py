@@ -223,7 +223,8 @@ def aorta_cohort():
         m, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", f"aorta{seed}"))
         models.append(m)
         diameters.append(ph.params["ascending_diameter_mm"])
-    aligned, _, _ = align_models(models)
+    L = max(m.n_knots for m in models)  # --L auto per vessel: one L for the cohort (as compute_atlas)
+    aligned, _, _ = align_models([m.with_n_knots(L) for m in models])
     return aligned, np.array(diameters)
 
 

@@ -23,7 +23,17 @@ CASES = {
         "aortacfd_patient1/wall_aorta.stl",
         {"inlet_cap": "aortacfd_patient1/inlet.stl", "outlet_cap": "aortacfd_patient1/outlet4.stl"},
     ),
+    # closed surfaces with flat unlabelled caps: points ~6-10 mm inside the root and descending caps
+    "vmr0154": (
+        "sphinxsys_vmr0154_aorta_capped.stl",
+        {"units": "cm", "inlet": "-0.911,4.689,3.648", "outlet": "-1.593,-0.865,0.994"},
+    ),
+    "tah_coarse": (
+        "sphinxsys_tah_aorta_capped_coarse.stl",
+        {"units": "mm", "inlet": "-23.0,-202.2,-1177.9", "outlet": "6.6,-123.6,-1246.3"},
+    ),
 }
+BRANCH_FREE = ("simvascular_open", "simvascular_capped", "vmtk_closed", "tah_coarse")
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +86,7 @@ def _end_centres(data, name, model):
     s = model.scale_to_mm
     if "inlet_cap" in opts:
         return [np.asarray(pv.read(data / opts[k]).points).mean(axis=0) * s for k in ("inlet_cap", "outlet_cap")]
-    if "inlet" in opts and name == "vmtk_closed":
+    if "inlet" in opts and name in ("vmtk_closed", "vmr0154", "tah_coarse"):
         return [None, None]
     mesh = pv.read(data / mesh_file)
     if "ModelFaceID" in mesh.cell_data and len(np.unique(mesh.cell_data["ModelFaceID"])) >= 3:
@@ -121,3 +131,28 @@ def test_aortacfd_wall_has_no_bump_at_branches(fits):
     # where the branches were cut out, the wall stays within 15 % of its ring's median radius
     # (no stump, no bump; measured: at most 1.08)
     assert np.all(model.wall(tau_b, th_b) <= 1.15 * np.median(ring, axis=1))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_default_fit_quality(fits, name):
+    """Issue 10 on every shared mesh with default settings (--L auto): the centerline inside the
+    lumen, tau the arc length within 5 % (aim 2 %), residual mean <= 0.2 mm, >= 95 % of the
+    vessel's wall points used (branch-free: 98 % of all between the end planes)."""
+    model, r, wf = fits[name]
+    assert r["L_source"] == "auto" and r["L"] >= 9
+    assert r["centerline_inside_lumen"] and r["centerline_min_wall_distance_ratio"] > 0.5
+    assert r["arc_length_speed_deviation"] <= 0.05
+    assert r["residual_mean_mm"] <= 0.2
+    assert r["fraction_points_used_of_vessel"] >= 0.95
+    if name in BRANCH_FREE:
+        assert r["fraction_points_used"] >= 0.98, r["points_not_used"]
+        assert r["points_not_used"]["branch"] == 0
+    assert r["quality"] in ("ok", "poor") and isinstance(r["quality_reasons"], list)
+    json.dumps(r)
+
+
+def test_real_branches_still_removed(fits):
+    """The three supra-aortic branches of AortaCFD and the four stubs of the VMR aorta are cut out."""
+    assert fits["aortacfd"][1]["points_not_used"]["branch"] > 5000
+    assert fits["vmr0154"][1]["points_not_used"]["branch"] > 1500
+    assert fits["aortacfd"][1]["quality"] == "ok"
