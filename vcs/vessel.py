@@ -536,7 +536,8 @@ def wall_quality(wall_fit: WallFit, n_tau: int = 201, n_theta: int = 64) -> dict
         smallest ratio, over tau, of min_theta rho_w to the median radius of the wall points used
         around that tau; dimensionless), ``model_radius_min_tau``, ``residual_p95_mm``,
         ``median_radius_mm``, ``fraction_points_used`` (of the wall points between the end planes),
-        ``fraction_points_used_of_vessel`` (the same without the points on side branches).
+        ``fraction_points_used_of_vessel`` (the same without the points on side branches and
+        those where the wall is not star-convex about the centerline, separate reasons).
     """
     tau = np.linspace(0.0, 1.0, n_tau)
     rho_w = wall_fit.model(tau[:, None], np.linspace(0.0, 2 * np.pi, n_theta, endpoint=False)[None, :])
@@ -553,7 +554,7 @@ def wall_quality(wall_fit: WallFit, n_tau: int = 201, n_theta: int = 64) -> dict
     i = int(np.nanargmin(ratio)) if np.isfinite(ratio).any() else 0
     r = wall_fit.report
     n_between = r["n_wall_points"] - r["points_not_used"]["beyond_end_planes"]
-    n_vessel = n_between - r["points_not_used"]["branch"]
+    n_vessel = n_between - r["points_not_used"]["branch"] - r["points_not_used"]["not_first_crossing"]
     res = wall_fit.residual[used]
     return {
         "model_radius_min_mm": float(rho_w.min()),
@@ -621,8 +622,8 @@ def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) 
             )
         elif report["fraction_points_used_of_vessel"] < lim["min_fraction_points_used_of_vessel"]:
             why.append(
-                f"only {100 * report['fraction_points_used_of_vessel']:.0f} % of the wall points off side "
-                f"branches were used ({report['points_not_used']})"
+                f"only {100 * report['fraction_points_used_of_vessel']:.0f} % of the star-convex wall points "
+                f"off side branches were used ({report['points_not_used']})"
             )
         p95, r_med = report.get("residual_p95_mm"), report.get("median_radius_mm")
         if p95 is not None and r_med and p95 > lim["max_residual_p95_ratio"] * r_med:
