@@ -458,7 +458,8 @@ def fit_wall(
         med = ring_median()[b]
         weak = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * med))
         # a stub reaching past the centre of curvature is outside Omega: it links and seeds too
-        linked = weak | (reason == 2)
+        far_out = (reason == 2) & (rho > (1.0 + 2.5 * branch_rel) * med)
+        linked = weak | far_out
         strong = linked & (rho > (1.0 + reach_rel) * np.where(cand, np.minimum(pred, med), med))
         out = _regions_with_seeds(adj, linked, strong) & cand
         grown = out.copy()
@@ -472,7 +473,8 @@ def fit_wall(
     # points outside Omega that touch a branch region (stubs reaching past the centre of
     # curvature, a branch beyond the reach of the curve) belong to that branch
     if (reason == 4).any() and (reason == 2).any():
-        reason[_regions_with_seeds(adj, (reason == 2) | (reason == 4), reason == 4) & (reason == 2)] = 4
+        far_out = (reason == 2) & (rho > (1.0 + 2.5 * branch_rel) * ring_median()[b])
+        reason[_regions_with_seeds(adj, far_out | (reason == 4), reason == 4) & far_out] = 4
     sel = reason == 0
     if (reason == 4).any():
         model = fit()
