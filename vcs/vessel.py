@@ -119,7 +119,7 @@ class VesselModel:
         The curve is refitted by least squares to 4,001 of its own points equally spaced in tau
         (= arc length), with the same end points and end tangents, and re-parametrised by arc
         length (:func:`vcs.centerline.fit_centerline`, Eq. 1); v1(0) is transported onto the new
-        t(0). Raising L changes the curve by microns (measured in the README), so (tau, theta,
+        t(0). Raising L moves c(tau) by < 0.1 mm (0.06 mm on aorta phantom 1), so (tau, theta,
         rho) and rho_w(tau, theta) keep their meaning.
 
         Parameters
