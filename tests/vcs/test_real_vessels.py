@@ -62,11 +62,17 @@ def test_centerline_inside_lumen_and_at_end_centres(fits, shared_data, name):
     model, report, wall_fit = fits[name]
     surf = read_surface(shared_data / CASES[name][0])
     wall = surf.vertices[np.unique(surf.faces)]
+    # slab of wall vertices around each section: at least 3 mm, and 1.5 long edges (90th percentile)
+    # on coarse or anisotropic meshes (sphinxsys_vmr0154: p90 edge 4.3 mm, a 3 mm slab misses whole
+    # octants of a ring there although the centerline is 9.5 mm from the wall)
+    tri = surf.vertices[surf.faces]
+    edge = float(np.percentile(np.linalg.norm(tri[:, 0] - tri[:, 1], axis=1), 90))
+    half = max(3.0, 1.5 * edge)
     for tau in np.linspace(0.03, 0.97, 48):
         c = model.vcs.curve(tau)
         t, v1, v2 = (a[0] for a in model.vcs.frame(np.array([tau])))
         d = wall - c
-        slab = np.abs(d @ t) < 3.0
+        slab = np.abs(d @ t) < half
         ang = np.arctan2(d[slab] @ v2, d[slab] @ v1)
         octants = np.unique(((ang + np.pi) / (np.pi / 4)).astype(int) % 8)
         assert len(octants) == 8, f"tau={tau:.2f}: wall does not surround the centerline"
