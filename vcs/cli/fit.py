@@ -83,6 +83,22 @@ def cmd_fit(args: argparse.Namespace) -> None:
         print(f"warning: {w}", file=sys.stderr)
 
 
+def _knots(text: str) -> int | str:
+    """``--L``: ``auto`` or a positive number of knots.
+
+    Parameters
+    ----------
+    text : str
+        The option's value.
+
+    Returns
+    -------
+    int or str
+        The number, or ``"auto"``.
+    """
+    return "auto" if text.strip().lower() == "auto" else positive_int(text)
+
+
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register `vcs fit` on the subparsers object of the `vcs` parser.
 
@@ -105,7 +121,13 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     f.add_argument("--inlet-cap", help="surface file of the inlet cap (same units as the mesh)")
     f.add_argument("--outlet-cap", help="surface file of the outlet cap")
     f.add_argument("--cap-array", default="auto", help="cell array labelling caps (auto: ModelFaceID, CapID, ...)")
-    f.add_argument("--L", type=positive_int, default=9, help="centerline interior knots (paper: 9)")
+    f.add_argument(
+        "--L",
+        type=_knots,
+        default="auto",
+        help="centerline interior knots: a number (paper: 9) or auto (default: the smallest L >= 9 "
+        "keeping the centerline inside the lumen and |c'| constant within 2 %%)",
+    )
     f.add_argument("--K", type=positive_int, default=19, help="wall knots in tau (paper: 19)")
     f.add_argument("--R", type=positive_int, default=15, help="wall knots in theta (paper: 15)")
     f.add_argument(
