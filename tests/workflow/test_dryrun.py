@@ -112,7 +112,34 @@ def test_mesh_path_with_spaces_is_quoted(cohort):
     ]
     p2 = [c for c in fit_cmds if "p 2 scan" in c]
     assert p2 and "'meshes/p 2 scan.stl'" in p2[0], fit_cmds
-    assert "--inlet 0,0,0 --outlet 0,0,100" in p2[0]
+    assert "--inlet=0,0,0 --outlet=0,0,100" in p2[0]
+
+
+def test_fit_runs_with_sheet_points_with_minus_signs_and_spaces(tmp_path, workdir_factory):
+    """Sheet points as scanners give them (negative, written with spaces) reach `vcs fit` as one
+    argument each that argparse cannot mistake for an option, and the fit itself runs (a torus
+    phantom moved to negative coordinates; the points pick its two open ends, outlet first)."""
+    import json
+
+    import numpy as np
+
+    from vcs.mesh import write_stl_binary
+    from vcs.phantoms.factory import make_phantom
+
+    ph = make_phantom("torus", resolution=2.5)
+    shift = np.array([-150.0, -75.5, -1200.0])
+    (tmp_path / "meshes").mkdir()
+    write_stl_binary(tmp_path / "meshes" / "neg torus.stl", ph.vertices + shift, ph.faces)
+    inlet = ", ".join(f"{v:.2f}" for v in ph.outlet_center + shift)  # "-190.00, -75.50, -1200.00"
+    outlet = " " + ",".join(f"{v:.2f}" for v in ph.inlet_center + shift)  # " -110.00,-75.50,-1200.00"
+    wd = workdir_factory(tmp_path, [{"id": "N1", "mesh": "meshes/neg torus.stl", "inlet": inlet, "outlet": outlet}])
+    r = wd.snakemake("-n", "-p", "results/patients/N1/fit/model.json")
+    assert "--inlet='-190.00, -75.50, -1200.00' --outlet=-110.00,-75.50,-1200.00" in r.stdout + r.stderr
+    wd.snakemake("-c1", "results/patients/N1/fit/model.json")
+    rep = json.loads((tmp_path / "results/patients/N1/fit/fit_report.json").read_text())
+    assert rep["units"] == "mm" and rep["ends_method"] == "open_loops"
+    assert np.linalg.norm(np.array(rep["inlet"]["center_mm"]) - (ph.outlet_center + shift)) < 0.5
+    assert np.linalg.norm(np.array(rep["outlet"]["center_mm"]) - (ph.inlet_center + shift)) < 0.5
 
 
 def test_demo_rows_generate_their_phantoms(tmp_path, workdir_factory):

@@ -1,6 +1,7 @@
 """Argument helpers shared by the command modules of :mod:`vcs.cli`.
 
-argparse types for integer ranges, the output-path checks (an output directory, never an input
+argparse types for integer ranges, options whose value is a point (``--inlet -40,0,0``: a value
+that starts with a minus sign), the output-path checks (an output directory, never an input
 overwritten) and the JSON writer. Imports nothing from the rest of :mod:`vcs.cli`.
 """
 
@@ -8,7 +9,8 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +51,70 @@ positive_int: Callable[[str], int] = int_at_least(1)
 
 non_negative_int: Callable[[str], int] = int_at_least(0)
 """argparse ``type``: an integer >= 0 (iteration counts)."""
+
+POINT_OPTIONS: set[str] = set()
+"""Option strings registered by :func:`add_point_argument` (their values may start with a minus sign)."""
+
+# a value that starts like a negative number: "-40,0,0", "-.5, 1, 2", "-1e-3,0,0"
+_NEGATIVE_VALUE = re.compile(r"-\s*\.?[0-9]")
+
+
+def add_point_argument(parser: argparse.ArgumentParser, *flags: str, **kwargs: Any) -> argparse.Action:
+    """Add an option that takes a point ``x,y,z`` (or another value that may start with a minus sign).
+
+    argparse reads a value such as ``-40,0,0`` after a space as an unknown option ("expected one
+    argument"); the flags registered here are rewritten to ``--flag=value`` by
+    :func:`join_point_values` before parsing, so ``--inlet -40,0,0`` and ``--inlet=-40,0,0`` both work.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The (sub)parser of the command.
+    *flags : str
+        Option strings, e.g. ``"--inlet"``.
+    **kwargs
+        Passed to :meth:`argparse.ArgumentParser.add_argument`.
+
+    Returns
+    -------
+    argparse.Action
+        The added action.
+    """
+    POINT_OPTIONS.update(f for f in flags if f.startswith("--"))
+    return parser.add_argument(*flags, **kwargs)
+
+
+def join_point_values(argv: Sequence[str]) -> list[str]:
+    """``argv`` with ``--flag VALUE`` written as ``--flag=VALUE`` when VALUE starts with a minus sign.
+
+    Only flags registered by :func:`add_point_argument` are joined, and only when the next
+    argument starts like a negative number (``-40,0,0``, ``-.5,1,2``; leading blanks allowed);
+    everything after ``--`` is left alone.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        Command-line arguments without the program name.
+
+    Returns
+    -------
+    list of str
+        The arguments for :meth:`argparse.ArgumentParser.parse_args`.
+    """
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        if arg == "--":
+            out.extend(argv[i:])
+            break
+        if arg in POINT_OPTIONS and i + 1 < len(argv) and _NEGATIVE_VALUE.match(argv[i + 1].lstrip()):
+            out.append(f"{arg}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(arg)
+        i += 1
+    return out
 
 
 def output_dir(path: PathLike) -> Path:

@@ -149,10 +149,13 @@ def fit_input(wildcards):
 
 
 def fit_ends(wildcards):
-    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic)."""
+    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic).
+
+    Points are passed as --inlet=VALUE: a value starting with a minus sign (-40,0,0) is then never
+    taken for an option, and shlex.quote keeps spaces ("-40, 0, 0") in one argument."""
     row = PATIENTS[wildcards.id]
     if row["inlet"]:
-        return f"--inlet {shlex.quote(row['inlet'])} --outlet {shlex.quote(row['outlet'])}"
+        return f"--inlet={shlex.quote(row['inlet'])} --outlet={shlex.quote(row['outlet'])}"
     if row["inlet_cap"]:
         return f"--inlet-cap {shlex.quote(row['inlet_cap'])} --outlet-cap {shlex.quote(row['outlet_cap'])}"
     return ""
