@@ -293,6 +293,7 @@ def largest_component(surf: Surface) -> Surface:
         surf.units_source,
         surf.path,
         (*surf.warnings, msg),
+        surf.units_evidence,
     )
 
 
@@ -431,6 +432,7 @@ def fit_vessel(
         "mesh": str(surf.path),
         "units": surf.units,
         "units_source": surf.units_source,
+        "units_evidence": surf.units_evidence,
         "n_vertices": int(len(surf.vertices)),
         "n_triangles": int(len(surf.faces)),
         **vcs.report,
