@@ -65,6 +65,12 @@ class Surface:
         """Millimetres per unit of the input file (1, 10 or 1000)."""
         return UNIT_TO_MM[self.units]
 
+    @property
+    def lumen_radius_mm(self) -> float | None:
+        """Median lumen radius (mm) measured for ``--units auto``; None when the units were given."""
+        r = self.units_evidence.get("candidates", {}).get(self.units, {}).get("median_lumen_radius_mm")
+        return None if r is None else float(r)
+
 
 # --units auto: human lumen radii (coronary ~1 mm to an aneurysmal aorta ~25 mm) and how a typical
 # vessel section looks (median lumen radius ~5 mm, largest extent ~120 mm); the extent only

@@ -402,7 +402,7 @@ def fit_vessel(
         inlet_cap=caps[0],
         outlet_cap=caps[1],
         cap_array=cap_array,
-        lumen_radius=surf.units_evidence.get("candidates", {}).get(surf.units, {}).get("median_lumen_radius_mm"),
+        lumen_radius=surf.lumen_radius_mm,
         units=surf.units,
     )
     t_read = time.perf_counter()

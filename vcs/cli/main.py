@@ -1,4 +1,4 @@
-"""Command line: `vcs fit|coords|cartesian|wall|grid|phantom|sensitivity`.
+"""Command line: `vcs fit|ends|coords|cartesian|wall|grid|phantom|sensitivity`.
 
 Bad input ends with one line on stderr naming the problem and the fix, and exit code 2.
 """
@@ -12,6 +12,7 @@ import warnings
 from collections.abc import Sequence
 
 from vcs.cli._args import join_point_values
+from vcs.cli.ends import add_commands as add_ends_commands
 from vcs.cli.fit import add_commands as add_fit_commands
 from vcs.cli.phantom import add_commands as add_phantom_commands
 from vcs.cli.points import add_commands as add_points_commands
@@ -22,6 +23,7 @@ from vcs.errors import VCSInputError
 # the order of the subcommands in `vcs --help`
 _COMMAND_GROUPS = (
     add_fit_commands,
+    add_ends_commands,
     add_points_commands,
     add_phantom_commands,
     add_wall_commands,
