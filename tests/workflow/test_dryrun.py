@@ -142,6 +142,22 @@ def test_fit_runs_with_sheet_points_with_minus_signs_and_spaces(tmp_path, workdi
     assert np.linalg.norm(np.array(rep["outlet"]["center_mm"]) - (ph.inlet_center + shift)) < 0.5
 
 
+def test_sheet_ends_listed_by_vcs_ends_reach_the_fit(cohort):
+    """inlet/outlet cells may name ends of `vcs ends` (end:N, NAME=VALUE) instead of points."""
+    cohort.write_sheet(
+        [
+            {"id": "P1", "mesh": "meshes/p1.stl", "inlet": "end:2", "outlet": " end:0"},
+            {"id": "P2", "mesh": "meshes/p 2 scan.stl", "inlet": "ModelFaceID=3", "outlet": "ModelFaceID=-1"},
+            {"id": "P3", "mesh": "meshes/p3.stl", "inlet": "-1.5e1, -2, -3.25", "outlet": "-4,5,-6"},
+        ]
+    )
+    r = cohort.snakemake("-n", "-p", "--forcerun", "vcs_fit")
+    text = r.stdout + r.stderr
+    assert "--inlet=end:2 --outlet=end:0" in text
+    assert "--inlet=ModelFaceID=3 --outlet=ModelFaceID=-1" in text
+    assert "--inlet='-1.5e1, -2, -3.25' --outlet=-4,5,-6" in text
+
+
 def test_demo_rows_generate_their_phantoms(tmp_path, workdir_factory):
     wd = workdir_factory(
         tmp_path, [{"id": f"demo_{s}", "mesh": f"results/demo/aorta_seed{s}.stl", "units": "mm"} for s in (0, 1, 2)]
@@ -226,6 +242,13 @@ def test_ends_given_twice_fail_with_one_line(cohort):
 def test_half_given_ends_fail_with_one_line(cohort):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": "0,0,0"}])
     assert "both inlet and outlet" in _one_line_error(cohort)
+
+
+@pytest.mark.parametrize("bad", ["2", "end:", "1,2", "cap 3"])
+def test_malformed_sheet_end_fails_with_one_line(cohort, bad):
+    cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": bad, "outlet": "end:1"}])
+    msg = _one_line_error(cohort)
+    assert f"inlet '{bad}'" in msg and "x,y,z" in msg and "end:N" in msg
 
 
 def test_bad_config_value_fails_with_one_line(cohort):

@@ -117,7 +117,11 @@ def load_patients(sheet):
             elif "is a dependency of" in msg:
                 msg = f"{msg.split(': ', 1)[-1]}: the ends need both inlet and outlet (points or caps)"
             elif "does not match" in msg:
-                msg = f"{msg.split(':', 1)[0]} '{record[msg.split(':', 1)[0]]}' must be three numbers x,y,z"
+                column = msg.split(":", 1)[0]
+                msg = (
+                    f"{column} '{record[column]}' must be a point x,y,z (mesh units) or an end listed by "
+                    "`vcs ends`: end:N or NAME=VALUE"
+                )
             fail(f"patients sheet '{sheet}' line {n} (id {pid}): {msg}")
         for column in ("mesh", "inlet_cap", "outlet_cap"):
             if column in record:
