@@ -202,6 +202,36 @@ def measure_units(vertices: NDArray[np.floating], faces: NDArray[np.integer]) ->
     return guess
 
 
+def _is_ascii_stl(path: Path) -> bool:
+    """True for an ASCII STL file (it starts with ``solid`` and its second line is a facet or endsolid)."""
+    if path.suffix.lower() != ".stl":
+        return False
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+    lines = head.lstrip().split(b"\n", 2)
+    return head.lstrip().startswith(b"solid") and len(lines) > 1 and lines[1].strip()[:5] in (b"facet", b"endso")
+
+
+def _read_ascii_stl_solids(path: Path) -> pv.PolyData:
+    """An ASCII STL read by VTK's STL reader (as pyvista does) with its solids as a cell array.
+
+    A multi-solid STL (``solid wall`` ... ``solid inlet`` ...) gets the cell array
+    ``STLSolidLabeling`` (0, 1, ... in file order), so that caps written as separate solids are
+    labelled caps (:func:`vcs.ends.list_ends`); a single-solid file gets no array.
+    """
+    import pyvista as pv
+    from vtkmodules.vtkIOGeometry import vtkSTLReader
+
+    reader = vtkSTLReader()
+    reader.SetFileName(str(path))
+    reader.ScalarTagsOn()
+    reader.Update()
+    mesh = pv.wrap(reader.GetOutput())
+    if "STLSolidLabeling" in mesh.cell_data and len(np.unique(mesh.cell_data["STLSolidLabeling"])) < 2:
+        del mesh.cell_data["STLSolidLabeling"]
+    return mesh
+
+
 def _read_polydata(path: Path) -> pv.PolyData:
     """Read any pyvista-readable surface file as PolyData (VTK reader errors -> VCSInputError)."""
     import pyvista as pv
@@ -210,7 +240,7 @@ def _read_polydata(path: Path) -> pv.PolyData:
     vtk.vtkObject.GlobalWarningDisplayOff()  # reader errors become our one-line message
 
     try:
-        mesh = pv.read(str(path))
+        mesh = _read_ascii_stl_solids(path) if _is_ascii_stl(path) else pv.read(str(path))
     except Exception as exc:  # VTK readers raise many kinds of errors
         raise VCSInputError(
             f"cannot read '{path}' as a surface mesh ({type(exc).__name__}); "

@@ -211,6 +211,22 @@ def test_any_integer_cell_array_with_few_labels_labels_caps():
     assert ends.cap_array is None and [c.kind for c in ends.candidates] == ["flat cap", "flat cap"]
 
 
+def test_caps_written_as_separate_solids_of_an_ascii_stl_are_labelled(tmp_path):
+    from vcs.mesh import write_stl_ascii
+
+    m = capped_cylinder()
+    tris = np.asarray(m.vertices)[np.asarray(m.faces)]
+    nz = m.face_normals[:, 2]
+    path = tmp_path / "solids.stl"
+    write_stl_ascii(path, {"wall": tris[np.abs(nz) < 0.99], "inlet": tris[nz < -0.99], "outlet": tris[nz > 0.99]})
+    r = run("ends", path)
+    assert r.returncode == 0 and "STLSolidLabeling=1" in r.stdout and "STLSolidLabeling=2" in r.stdout, r.stdout
+    r = run("fit", path, "-o", tmp_path / "f", "--inlet", "STLSolidLabeling=2", "--outlet", "STLSolidLabeling=1")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((tmp_path / "f" / "fit_report.json").read_text())
+    assert rep["ends_method"] == "labelled_caps" and rep["inlet"]["center_mm"][2] > rep["outlet"]["center_mm"][2]
+
+
 def test_blunt_closed_ends_of_a_capsule(tmp_path):
     """Rounded ends (no flat cap, no loop): the geodesic extremities are the ends; the fit needs no option."""
     m = trimesh.creation.capsule(height=120.0, radius=9.0, count=[48, 48])

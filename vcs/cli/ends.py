@@ -118,15 +118,17 @@ def cmd_ends(args: argparse.Namespace) -> None:
     u = table["units"]
     rows = table["candidates"]
     print(f"{args.mesh}: {len(rows)} candidate end(s); units {u} ({table['units_source']})")
+    width = max([5, *(len(r["label"] or "") for r in rows)])
     if rows:
         print(
-            f"{'end':>6}  {'kind':<12} {'label':<16} {'centre (' + u + ')':<34} {'radius':>9}  normal (into the lumen)"
+            f"{'end':>6}  {'kind':<12} {'label':<{width}} {'centre (' + u + ')':<34} {'radius':>9}  "
+            "normal (into the lumen)"
         )
     for r in rows:
         c = ", ".join(f"{x:.{_DECIMALS[u]}f}" for x in r["center"])
         n = "-" if r["normal"] is None else "(" + ", ".join(f"{x:.2f}" for x in r["normal"]) + ")"
         print(
-            f"{r['select']:>6}  {r['kind']:<12} {r['label'] or '-':<16} {'(' + c + ')':<34} "
+            f"{r['select']:>6}  {r['kind']:<12} {r['label'] or '-':<{width}} {'(' + c + ')':<34} "
             f"{r['radius']:>9.{_DECIMALS[u]}f}  {n}"
         )
     sug = table["suggested"]
