@@ -176,6 +176,10 @@ SHIFT = np.array([-212.5, -40.0, -1250.0])  # real scanner coordinates are mostl
         (["--inlet", " -40,0,0"], " -40,0,0"),
         (["--inlet", "-.5,-1e-3,-2"], "-.5,-1e-3,-2"),
         (["--inlet", "end:0"], "end:0"),
+        (["--inlet", "40,0,0"], "40,0,0"),
+        (["--inlet", "-40,", "0,", "0"], "-40,0,0"),  # unquoted "-40, 0, 0": three shell words
+        (["--inlet", "40,", "-1,", "-2"], "40,-1,-2"),
+        (["--inlet=-40,", "0,", "-0.5"], "-40,0,-0.5"),
     ],
 )
 def test_point_options_accept_a_leading_minus_sign(given, expected):

@@ -57,6 +57,7 @@ POINT_OPTIONS: set[str] = set()
 
 # a value that starts like a negative number: "-40,0,0", "-.5, 1, 2", "-1e-3,0,0"
 _NEGATIVE_VALUE = re.compile(r"-\s*\.?[0-9]")
+_NUMBER = re.compile(r"[-+]?\s*\.?[0-9]")
 
 
 def add_point_argument(parser: argparse.ArgumentParser, *flags: str, **kwargs: Any) -> argparse.Action:
@@ -85,11 +86,13 @@ def add_point_argument(parser: argparse.ArgumentParser, *flags: str, **kwargs: A
 
 
 def join_point_values(argv: Sequence[str]) -> list[str]:
-    """``argv`` with ``--flag VALUE`` written as ``--flag=VALUE`` when VALUE starts with a minus sign.
+    """``argv`` with the value of each point option joined to it: ``--flag=VALUE``.
 
-    Only flags registered by :func:`add_point_argument` are joined, and only when the next
-    argument starts like a negative number (``-40,0,0``, ``-.5,1,2``; leading blanks allowed);
-    everything after ``--`` is left alone.
+    For flags registered by :func:`add_point_argument`: ``--flag VALUE`` becomes ``--flag=VALUE``
+    when VALUE starts like a negative number (``-40,0,0``, ``-.5,1,2``; leading blanks allowed),
+    which argparse would take for an option; and a point split by the shell at its commas
+    (``--inlet -40, 0, 0`` unquoted: ``-40,`` ``0,`` ``0``) is put back together (a value ending in
+    a comma takes the next argument, at most twice). Everything after ``--`` is left alone.
 
     Parameters
     ----------
@@ -108,9 +111,22 @@ def join_point_values(argv: Sequence[str]) -> list[str]:
         if arg == "--":
             out.extend(argv[i:])
             break
-        if arg in POINT_OPTIONS and i + 1 < len(argv) and _NEGATIVE_VALUE.match(argv[i + 1].lstrip()):
-            out.append(f"{arg}={argv[i + 1]}")
-            i += 2
+        flag, eq, value = arg.partition("=")
+        if flag in POINT_OPTIONS and (eq or i + 1 < len(argv)):
+            if not eq:
+                value = argv[i + 1]
+                if not _NEGATIVE_VALUE.match(value.lstrip()) and not value.rstrip().endswith(","):
+                    out.append(arg)  # an ordinary value: argparse reads it as it is
+                    i += 1
+                    continue
+                i += 1
+            for _ in range(2):  # "-40," "0," "0": the shell split the point at its blanks
+                if not (value.rstrip().endswith(",") and i + 1 < len(argv) and _NUMBER.match(argv[i + 1].lstrip())):
+                    break
+                value += argv[i + 1]
+                i += 1
+            out.append(f"{flag}={value}")
+            i += 1
             continue
         out.append(arg)
         i += 1
