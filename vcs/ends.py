@@ -29,6 +29,7 @@ from vcs.mesh import (
     edge_topology,
     half_edges,
     lumen_chords,
+    points_inside,
     polygon_properties,
     triangle_areas,
     triangle_cross,
@@ -438,15 +439,18 @@ def _closed_ends(
     faces: NDArray[np.integer],
     lumen_radius: float,
     taken: list[tuple[NDArray[np.floating], float]],
+    closed: bool = True,
 ) -> list[tuple[NDArray[np.floating], NDArray[np.floating], float]]:
     """Blunt ends of a closed surface: geodesic extremities, each with a point on the lumen axis next to it.
 
     The tips are the vertex farthest (along the surface) from an arbitrary vertex, and the local
     maxima of the geodesic distance from that tip that are maxima within 1.5 lumen radii. Near
-    each tip, the wall within 2 lumen radii gives the lumen's axis direction (tip -> centroid) and a
-    slab across it a point on the axis and the local radius. Tips within 2 radii (+ half a lumen
+    each tip, the wall within 2 lumen radii (sampled, :func:`_surface_samples`) gives the lumen's
+    axis direction (tip -> centroid) and a slab across it a point on the axis, moved to the last
+    full cross-section before the end (:func:`_full_section`), and the local radius. Tips within 2 radii (+ half a lumen
     radius) of a ``taken`` end (centre, radius) are the same end and skipped, and so is a point
-    within one lumen radius of an earlier one (two tips of one blob, e.g. a sphere).
+    within one lumen radius of an earlier one (two tips of one blob, e.g. a sphere). On a
+    ``closed`` surface a point outside the lumen is replaced by the first estimate, or dropped.
     Returns (point on the axis, unit direction into the lumen, radius) per closed end, mm.
     """
     he, _ = half_edges(faces)
@@ -471,33 +475,118 @@ def _closed_ends(
         if d[ball].max() <= d[c]:
             tips.append(c)
     tri = vertices[faces]
-    centroid = tri.mean(axis=1)
-    area = triangle_areas(vertices, faces)
     out: list[tuple[NDArray[np.floating], NDArray[np.floating], float]] = []
     for t in tips:
         tip = vertices[t]
         if any(np.linalg.norm(tip - c) <= 2.0 * r + 0.5 * lumen_radius for c, r in taken):
             continue
         near_v = np.isfinite(dijkstra(graph, indices=t, limit=3.0 * lumen_radius))
-        near = near_v[faces].all(axis=1) & (np.linalg.norm(centroid - tip, axis=1) < 2.0 * lumen_radius)
-        if near.sum() < 6:
+        x, w = _surface_samples(vertices, faces[near_v[faces].any(axis=1)], 0.2 * lumen_radius)
+        keep = np.linalg.norm(x - tip, axis=1) < 3.0 * lumen_radius
+        x, w = x[keep], w[keep]
+        ball = np.linalg.norm(x - tip, axis=1) < 2.0 * lumen_radius
+        if ball.sum() < 6:
             continue
-        c = (centroid[near] * area[near, None]).sum(axis=0) / area[near].sum()
+        c = (x[ball] * w[ball, None]).sum(axis=0) / w[ball].sum()
         axis = c - tip
         if np.linalg.norm(axis) < 1e-9 * lumen_radius:
             continue
         axis /= np.linalg.norm(axis)
-        rel = centroid - c
-        slab = near & (np.abs(rel @ axis) < 0.5 * lumen_radius)
+        slab = ball & (np.abs((x - c) @ axis) < 0.5 * lumen_radius)
         if slab.sum() < 6:
             continue
-        point = (centroid[slab] * area[slab, None]).sum(axis=0) / area[slab].sum()
-        off = centroid[slab] - point
-        radius = float(np.median(np.linalg.norm(off - np.outer(off @ axis, axis), axis=1)))
+        start = (x[slab] * w[slab, None]).sum(axis=0) / w[slab].sum()
+        point, axis, radius = _full_section(x, w, start, axis, lumen_radius)
+        if closed:  # the point must lie in the lumen (ray parity on the closed surface)
+            inside = points_inside(np.stack([point, start]), tri)
+            if not inside.any():
+                continue
+            point = point if inside[0] else start
         if any(np.linalg.norm(point - q) < lumen_radius for q, _, _ in out):
             continue  # two tips of one blob (a sphere, a short stump): not two ends of a tube
         out.append((point, axis, radius))
     return out
+
+
+def _surface_samples(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], spacing: float
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """Points on the triangles at most ~``spacing`` apart (barycentric grids), each with its share of
+    the triangle's area: long thin triangles (a cylinder wall in one band) are sampled along their
+    length, not only at their centroid. Returns (P, 3) points (mm) and (P,) areas (mm^2)."""
+    tri = vertices[faces]
+    area = triangle_areas(vertices, faces)
+    edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    n_sub = np.clip(np.ceil(edge / spacing), 1, 40).astype(int)
+    pts, wts = [tri.mean(axis=1)[n_sub == 1]], [area[n_sub == 1]]
+    for n in np.unique(n_sub[n_sub > 1]):
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        ok = i + j <= n
+        b1, b2 = i[ok] / n, j[ok] / n
+        b0 = 1.0 - b1 - b2
+        tb = tri[n_sub == n]
+        pts.append(
+            (
+                b0[None, :, None] * tb[:, None, 0]
+                + b1[None, :, None] * tb[:, None, 1]
+                + b2[None, :, None] * tb[:, None, 2]
+            ).reshape(-1, 3)
+        )
+        wts.append(np.repeat(area[n_sub == n] / len(b0), len(b0)))
+    return np.concatenate(pts), np.concatenate(wts)
+
+
+def _full_section(
+    x: NDArray[np.floating],
+    w: NDArray[np.floating],
+    point: NDArray[np.floating],
+    axis: NDArray[np.floating],
+    lumen_radius: float,
+) -> tuple[NDArray[np.floating], NDArray[np.floating], float]:
+    """The last full cross-section before a closed end: a point on the axis there, the axis, the radius.
+
+    ``point`` is a section centre about a lumen radius in from the end and ``axis`` points into
+    the lumen. The axis is refined through the centre of the section one radius deeper; then,
+    going from ``point`` towards the end in steps of 0.1 lumen radii, the wall's median distance
+    from the axis stays above 85 % of the radius at ``point`` until the cap (flat, staircase or
+    rounded) begins (or a tenth of a slab's area comes near the axis), at most one radius: the
+    returned point is one step before the last such step. ``x``/``w`` are wall samples near the
+    end and their areas (mm, mm^2, :func:`_surface_samples`).
+    """
+    r = lumen_radius
+    deeper = (np.abs((x - point - r * axis) @ axis) < 0.5 * r) & (
+        np.linalg.norm(x - point - r * axis, axis=1) < 2.0 * r
+    )
+    if deeper.sum() >= 6:
+        q = (x[deeper] * w[deeper, None]).sum(axis=0) / w[deeper].sum()
+        if (q - point) @ axis > 0.3 * r:
+            axis = (q - point) / np.linalg.norm(q - point)
+    rel = x - point
+    s = rel @ axis
+    rho = np.linalg.norm(rel - np.outer(s, axis), axis=1)
+    a = w
+    ok = rho < 2.0 * r
+
+    def section(depth: float, full: float | None) -> float | None:
+        """Median wall distance from the axis in a slab at ``depth``; None when the slab has too
+        few triangles or reaches the cap (a tenth of its area within 0.7 ``full`` of the axis)."""
+        band = ok & (np.abs(s - depth) < 0.15 * r)
+        if band.sum() < 4:
+            return None
+        if full is not None and a[band & (rho < 0.7 * full)].sum() > 0.1 * a[band].sum():
+            return None
+        return float(np.median(rho[band]))
+
+    full = section(0.0, None)
+    if full is None:
+        return point, axis, r
+    depth = 0.0
+    while depth > -r:  # at most one lumen radius towards the end
+        here = section(depth - 0.1 * r, full)
+        if here is None or here < 0.85 * full:
+            break
+        depth -= 0.1 * r
+    return point + (depth + 0.1 * r if depth < 0 else 0.0) * axis, axis, full
 
 
 def _sorted(cands: list[EndCandidate]) -> list[EndCandidate]:
@@ -584,7 +673,7 @@ def list_ends(
                 wall_mask[idx] = False
                 flat.append(EndCandidate("flat cap", End(c, n, r, f"flat cap ({len(idx)} triangles)"), r, n, None, idx))
             taken = [(e.end.center, e.radius) for e in (*flat, *loop_ends)]
-            for p, axis, r in _closed_ends(vertices, faces, lumen_radius, taken):
+            for p, axis, r in _closed_ends(vertices, faces, lumen_radius, taken, closed=not loops):
                 closed.append(EndCandidate("closed end", End(p, None, None, "closed end"), r, axis))
             notes.append(f"closed surface: {len(flat)} flat caps, {len(closed)} closed ends")
 
