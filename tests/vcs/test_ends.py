@@ -314,3 +314,12 @@ def test_shared_meshes_candidate_kinds(shared_data, name, kinds):
 
     s = largest_component(read_surface(shared_data / name))
     assert [c.kind for c in list_ends(s.vertices, s.faces, s.cell_data).candidates] == kinds
+
+
+def test_vcs_ends_bad_input_is_one_line(tmp_path):
+    one_line_error(run("ends", tmp_path / "missing.stl"), "does not exist")
+    (tmp_path / "empty.stl").write_bytes(b"")
+    one_line_error(run("ends", tmp_path / "empty.stl"), "is empty")
+    m = capped_cylinder()
+    m.export(tmp_path / "t.stl")
+    one_line_error(run("ends", tmp_path / "t.stl", "--cap-array", "Nope"), "cell array 'Nope' not found")
