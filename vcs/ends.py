@@ -378,8 +378,10 @@ def _labelled_caps(
     """Caps labelled by a cell array: the values whose faces form a flat disc (at least two).
 
     ``cap_array="auto"`` tries :data:`CAP_ARRAY_NAMES`, then any other integer-valued cell array
-    with 3 to :data:`_MAX_LABELS` distinct values. Returns the array name (None when no array
-    labels two caps) and per cap its label ``NAME=VALUE``, faces and disc.
+    with 3 to :data:`_MAX_LABELS` distinct values; a cap has at least 3 triangles and the caps
+    cover less than half the surface (an array numbering the cells is not a labelling of caps).
+    Returns the array name (None when no array labels two caps) and per cap its label
+    ``NAME=VALUE``, faces and disc.
     """
     if cap_array is None:
         return None, []
@@ -393,6 +395,7 @@ def _labelled_caps(
         names += sorted(n for n in cell_data if n not in CAP_ARRAY_NAMES)
     else:
         names = [cap_array]
+    total_area = float(triangle_areas(vertices, faces).sum())
     for name in names:
         values = np.asarray(cell_data[name])
         if values.ndim != 1 or len(values) != len(faces) or not np.issubdtype(values.dtype, np.number):
@@ -405,10 +408,11 @@ def _labelled_caps(
             continue
         caps = []
         for idx in groups:
-            disc = _disc(vertices, faces[idx])
+            disc = _disc(vertices, faces[idx]) if len(idx) >= 3 else None
             if disc is not None:
                 caps.append((f"{name}={int(labels[idx[0]])}", idx, disc))
-        if len(caps) >= 2:
+        cap_area = sum(np.pi * disc[2] ** 2 for _, _, disc in caps)
+        if len(caps) >= 2 and cap_area < 0.5 * total_area:  # mostly wall: not one label per cell
             return name, caps
     return None, []
 

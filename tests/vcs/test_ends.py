@@ -209,6 +209,11 @@ def test_any_integer_cell_array_with_few_labels_labels_caps():
     walls = (np.arange(len(f)) % 5).astype(np.int32)
     ends = list_ends(v, f, {"ModelFaceID": walls})
     assert ends.cap_array is None and [c.kind for c in ends.candidates] == ["flat cap", "flat cap"]
+    # nor is an array numbering the cells (every single triangle is a flat disc)
+    small = trimesh.creation.cylinder(radius=10, height=40, sections=8)
+    sv, sf = np.asarray(small.vertices), np.asarray(small.faces)
+    ends = list_ends(sv, sf, {"GlobalElementID": np.arange(len(sf))})
+    assert ends.cap_array is None
 
 
 def test_caps_written_as_separate_solids_of_an_ascii_stl_are_labelled(tmp_path):
