@@ -72,11 +72,11 @@ class Surface:
         return None if r is None else float(r)
 
 
-# --units auto: human lumen radii (coronary ~1 mm to an aneurysmal aorta ~25 mm) and how a typical
-# vessel section looks (median lumen radius ~5 mm, largest extent ~120 mm); the extent only
-# breaks ties between units whose radii are both plausible
+# --units auto: human lumen radii (coronary ~1 mm to an aneurysmal aorta ~25 mm) and a typical
+# vessel section (median lumen radius ~6 mm, between small arteries ~3 mm and aortas ~12 mm;
+# largest extent ~120 mm); the extent only breaks ties between units whose radii are both plausible
 PLAUSIBLE_RADIUS_MM = (1.0, 25.0)
-TYPICAL_RADIUS_MM = 5.0
+TYPICAL_RADIUS_MM = 6.0
 TYPICAL_EXTENT_MM = 120.0
 EXTENT_WEIGHT = 0.5
 AMBIGUOUS_SCORE_MARGIN = 1.0
@@ -111,7 +111,7 @@ def guess_units(radius: float | None, extent: float) -> UnitsGuess:
     For each unit (m, cm, mm) the median lumen radius ``radius`` and the largest bounding-box
     extent ``extent`` are converted to mm. A unit is plausible when the radius lies in
     :data:`PLAUSIBLE_RADIUS_MM` (1-25 mm, human vessels); among the plausible units (all units if
-    none is) the one with the lowest score ln(r / 5 mm)^2 + 0.5 ln(E / 120 mm)^2 wins: the radius
+    none is) the one with the lowest score ln(r / 6 mm)^2 + 0.5 ln(E / 120 mm)^2 wins: the radius
     nearest a typical vessel radius, the extent deciding between units whose radii are both
     plausible (a 35 cm long aorta of radius 1.2 cm written in cm is cm; a 60 mm long carotid of
     radius 2 mm is mm). Another plausible unit within :data:`AMBIGUOUS_SCORE_MARGIN` of the best
