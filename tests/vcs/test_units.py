@@ -77,6 +77,8 @@ def test_fit_report_has_the_units_evidence(tmp_path):
 
 def test_guess_units_rule():
     assert guess_units(1.2, 34.5).unit == "cm"  # the aorta in cm: 12 mm radius, 345 mm extent
+    assert guess_units(1.8, 35.0).unit == "cm"  # a dilated thoracic aorta in cm: 18 mm median radius
+    assert guess_units(1.0, 45.0).unit == "cm"  # a whole aorta in cm, root to bifurcation
     assert guess_units(2.0, 60.0).unit == "mm"  # a carotid in mm: 2 mm radius, 60 mm extent
     assert guess_units(0.012, 0.3).unit == "m"
     assert guess_units(8.0, 100.0).unit == "mm"
