@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vcs.ends import find_ends
+from vcs.ends import find_ends, parse_end_option
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
 from vcs.mesh import connected_faces, triangle_areas
@@ -334,6 +334,7 @@ def largest_component(surf: Surface) -> Surface:
         surf.units_source,
         surf.path,
         (*surf.warnings, msg),
+        surf.units_evidence,
     )
 
 
@@ -396,8 +397,8 @@ def fit_vessel(
     units : {"auto", "mm", "cm", "m"}
         Units of the file (ignored for a :class:`Surface`).
     inlet, outlet : str, array-like of 3 floats, or None
-        End points in the mesh's units (``'x,y,z'`` strings or arrays), see
-        :func:`vcs.ends.find_ends`.
+        End points in the mesh's units (``'x,y,z'`` strings or arrays), or ends listed by
+        :func:`vcs.ends.list_ends` (``'end:N'``, ``'NAME=VALUE'``); see :func:`vcs.ends.find_ends`.
     inlet_cap, outlet_cap : Path, str or None
         Cap surface files, in the mesh's units; give both or neither.
     cap_array : str or None
@@ -424,9 +425,9 @@ def fit_vessel(
     surf = mesh if isinstance(mesh, Surface) else read_surface(mesh, units)
     surf = largest_component(surf)
     s = surf.scale_to_mm
-    p_in = parse_point(inlet, "inlet")
-    p_out = parse_point(outlet, "outlet")
-    if p_in is not None and p_out is not None and np.linalg.norm((p_in - p_out) * s) < 1.0:
+    p_in = parse_end_option(inlet, "inlet")
+    p_out = parse_end_option(outlet, "outlet")
+    if isinstance(p_in, np.ndarray) and isinstance(p_out, np.ndarray) and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
     caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
     for cap in (inlet_cap, outlet_cap):
@@ -439,11 +440,13 @@ def fit_vessel(
         surf.vertices,
         surf.faces,
         surf.cell_data,
-        inlet=None if p_in is None else p_in * s,
-        outlet=None if p_out is None else p_out * s,
+        inlet=p_in * s if isinstance(p_in, np.ndarray) else p_in,
+        outlet=p_out * s if isinstance(p_out, np.ndarray) else p_out,
         inlet_cap=caps[0],
         outlet_cap=caps[1],
         cap_array=cap_array,
+        lumen_radius=surf.lumen_radius_mm,
+        units=surf.units,
     )
     t_read = time.perf_counter()
     vcs = VesselCoordinateSystem.from_surface(
@@ -479,6 +482,7 @@ def fit_vessel(
         "mesh": str(surf.path),
         "units": surf.units,
         "units_source": surf.units_source,
+        "units_evidence": surf.units_evidence,
         "n_vertices": int(len(surf.vertices)),
         "n_triangles": int(len(surf.faces)),
         **vcs.report,

@@ -82,15 +82,23 @@ def test_bad_mesh_files_give_one_line(tmp_path, kind):
 
 
 def test_closed_surface_without_ends(tmp_path):
+    """A closed tube with two flat caps fits with no end given (the larger cap is the inlet), or
+    with points; a closed blob with no ends to find is one line asking for them."""
     import trimesh
 
     path = tmp_path / "closed.stl"
     trimesh.creation.cylinder(radius=10, height=100, sections=48).subdivide_to_size(2.0).export(path)
-    r = run("fit", path, "-o", tmp_path / "o", "--units", "mm")
-    assert r.returncode == 2 and "--inlet" in r.stderr and len(r.stderr.strip().splitlines()) == 1
-    # with the ends given as points it works
+    r = run("fit", path, "-o", tmp_path / "a", "--units", "mm")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((tmp_path / "a" / "fit_report.json").read_text())
+    assert rep["ends_method"] == "flat_caps" and abs(rep["centerline_length_mm"] - 100.0) < 0.5
     r = run("fit", path, "-o", tmp_path / "o", "--units", "mm", "--inlet", "0,0,49", "--outlet", "0,0,-49")
     assert r.returncode == 0, r.stderr
+    blob = tmp_path / "blob.stl"
+    trimesh.creation.icosphere(4, radius=10).export(blob)
+    r = run("fit", blob, "-o", tmp_path / "b", "--units", "mm")
+    assert r.returncode == 2 and "--inlet" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "b" / "model.json").exists()
 
 
 def test_three_openings_need_a_choice_and_points_outside(shared_data, tmp_path):

@@ -117,7 +117,11 @@ def load_patients(sheet):
             elif "is a dependency of" in msg:
                 msg = f"{msg.split(': ', 1)[-1]}: the ends need both inlet and outlet (points or caps)"
             elif "does not match" in msg:
-                msg = f"{msg.split(':', 1)[0]} '{record[msg.split(':', 1)[0]]}' must be three numbers x,y,z"
+                column = msg.split(":", 1)[0]
+                msg = (
+                    f"{column} '{record[column]}' must be a point x,y,z (mesh units) or an end listed by "
+                    "`vcs ends`: end:N or NAME=VALUE"
+                )
             fail(f"patients sheet '{sheet}' line {n} (id {pid}): {msg}")
         for column in ("mesh", "inlet_cap", "outlet_cap"):
             if column in record:
@@ -149,10 +153,13 @@ def fit_input(wildcards):
 
 
 def fit_ends(wildcards):
-    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic)."""
+    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic).
+
+    Points are passed as --inlet=VALUE: a value starting with a minus sign (-40,0,0) is then never
+    taken for an option, and shlex.quote keeps spaces ("-40, 0, 0") in one argument."""
     row = PATIENTS[wildcards.id]
     if row["inlet"]:
-        return f"--inlet {shlex.quote(row['inlet'])} --outlet {shlex.quote(row['outlet'])}"
+        return f"--inlet={shlex.quote(row['inlet'])} --outlet={shlex.quote(row['outlet'])}"
     if row["inlet_cap"]:
         return f"--inlet-cap {shlex.quote(row['inlet_cap'])} --outlet-cap {shlex.quote(row['outlet_cap'])}"
     return ""
