@@ -19,6 +19,10 @@ SHEET_COLUMNS = ("id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_
 
 # The `vcs` console script lives beside this Python (the project's venv): put it on PATH so that
 # shell rules work without an activated venv (also inside SLURM jobs, which run this file again).
+# One BLAS thread per job (set before the jobs start; SLURM jobs run this file again): the jobs
+# already run in parallel, and single-threaded sums are reproducible.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 _VENV_BIN = str(Path(sys.executable).parent)
 if _VENV_BIN not in os.environ.get("PATH", "").split(os.pathsep):
     os.environ.update(PATH=os.pathsep.join([_VENV_BIN, os.environ.get("PATH", "")]))
