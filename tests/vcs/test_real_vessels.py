@@ -68,7 +68,9 @@ def test_centerline_inside_lumen_and_at_end_centres(fits, shared_data, name):
     tri = surf.vertices[surf.faces]
     edge = float(np.percentile(np.linalg.norm(tri[:, 0] - tri[:, 1], axis=1), 90))
     half = max(3.0, 1.5 * edge)
-    ends = 0.05 if half > 3.0 else 0.03  # a wide slab must not reach past the end planes
+    # sections whose slab stays inside the section (a wide slab must not reach past an end plane)
+    length = float(np.linalg.norm(np.diff(model.vcs.curve(np.linspace(0, 1, 1001)), axis=0), axis=1).sum())
+    ends = max(0.03, 2.0 * half / length)
     for tau in np.linspace(ends, 1.0 - ends, 48):
         c = model.vcs.curve(tau)
         t, v1, v2 = (a[0] for a in model.vcs.frame(np.array([tau])))
