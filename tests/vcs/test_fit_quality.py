@@ -76,7 +76,7 @@ def test_atlas_refits_to_one_L_and_excludes_poor_fits():
 
 @pytest.mark.parametrize("wavelength", [20.0, 40.0])
 def test_centerline_smoothing_halves_a_wiggle_of_wavelength_2_pi_ell(wavelength):
-    """The P-spline of fit_spline: a sinusoidal wiggle of wavelength 2 pi ell is kept with gain
+    """The smoothing spline of fit_spline: a sinusoidal wiggle of wavelength 2 pi ell is kept with gain
     1 / (1 + (2 pi ell / wavelength)^6): 1/2 at ell = wavelength / 2 pi, ~1 at a third of it,
     1.5 % at twice it (60 knots on 200 mm resolve the wiggle, the penalty alone damps it)."""
     from vcs.centerline import fit_spline
