@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -1079,26 +1078,25 @@ def section_centres(
     voting neighbours.
     """
     tri = vertices[wall_faces]
-    area = 0.5 * np.linalg.norm(triangle_cross(tri), axis=1)
-    w_vert = cast(
-        NDArray[np.floating], np.bincount(wall_faces.ravel(), np.repeat(area / 3.0, 3), minlength=len(vertices))
-    )
-    used = w_vert > 0
     p0, p1 = curve.c[0], curve.c[-1]
     if n_knots is None:
         n_knots = len(curve.t) - 2 * (curve.k + 1)
-    edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).mean()) if len(tri) else 0.0
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2) if len(tri) else np.zeros((1, 3))
+    edge = float(edges.mean())
     # pooled over >= 2.5 mesh edges (whole rings) and >= one knot span (the curve cannot follow
     # finer detail anyway; wider windows average the noise of bumpy surfaces and ostia out)
-    window_mm = max(2.5 * edge, curve_length(curve) / (n_knots + 1))
-    normals = vertex_normals(vertices, wall_faces)[used]
+    length = curve_length(curve)
+    window_mm = max(2.5 * edge, length / (n_knots + 1))
+    # long triangles vote along their length, not only at their corners
+    spacing = max(2.0 * float(np.median(edges)), length / max(32, 6 * (n_knots + 4)))
+    pts, w, normals = wall_samples(vertices, wall_faces, spacing)
     shifts = []
     centres = curve(np.linspace(0.0, 1.0, 257))
     for _ in range(iterations):
         curve, shift, centres = recentre_step(
             curve,
-            vertices[used],
-            w_vert[used],
+            pts,
+            w,
             p0,
             p1,
             n_knots,
@@ -1109,6 +1107,60 @@ def section_centres(
         )
         shifts.append(shift)
     return curve, shifts, centres
+
+
+def wall_samples(
+    vertices: NDArray[np.floating], wall_faces: NDArray[np.integer], spacing: float
+) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]:
+    """Area-weighted points of the wall that vote for the section centres (:func:`recentre_step`).
+
+    Each vertex carries a third of the area of its triangles and its (area-weighted) normal,
+    except that a triangle with an edge longer than ``spacing`` gives its area to a barycentric
+    grid of points at most ~``spacing`` apart, with the triangle's normal: a wall meshed with long
+    triangles (a tube in one band of triangles, a coarse or remeshed surface) has no vertices
+    along most of its length, and the sections there would have no votes (a 120 mm capsule
+    meshed so drifted 17 mm off its axis).
+
+    Parameters
+    ----------
+    vertices : (N, 3) float, mm
+    wall_faces : (M, 3) int
+        Triangles of the wall.
+    spacing : float, mm
+        Largest edge of a triangle voting by its vertices.
+
+    Returns
+    -------
+    points : (P, 3) float, mm
+    weights : (P,) float, mm^2
+        Their shares of the wall's area (the sum is the wall's area).
+    normals : (P, 3) float
+        Unit normals (orientation not significant).
+    """
+    tri = vertices[wall_faces]
+    cross = triangle_cross(tri)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1) if len(tri) else np.zeros(0)
+    n_sub = np.minimum(np.ceil(longest / max(spacing, 1e-9)), 64).astype(int)
+    small = n_sub <= 1
+    w_vert = np.bincount(wall_faces[small].ravel(), np.repeat(area[small] / 3.0, 3), minlength=len(vertices))
+    used = w_vert > 0
+    pts, wts = [vertices[used]], [w_vert[used]]
+    nrm = [vertex_normals(vertices, wall_faces)[used]]
+    unit = cross / np.maximum(2.0 * area, 1e-300)[:, None]
+    for n in np.unique(n_sub[~small]):
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        b1, b2 = i[keep] / n, j[keep] / n
+        b0 = 1.0 - b1 - b2
+        sel = n_sub == n
+        tb = tri[sel]
+        pts.append(
+            (b0[:, None] * tb[:, None, 0] + b1[:, None] * tb[:, None, 1] + b2[:, None] * tb[:, None, 2]).reshape(-1, 3)
+        )
+        wts.append(np.repeat(area[sel] / len(b0), len(b0)))
+        nrm.append(np.repeat(unit[sel], len(b0), axis=0))
+    return np.concatenate(pts), np.concatenate(wts), np.concatenate(nrm)
 
 
 def recentre_step(
