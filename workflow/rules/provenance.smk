@@ -106,20 +106,23 @@ def drop_stale_atlas():
     patient's file, the atlas is not rebuilt; the old one would still list that patient as
     included. If any input of atlas_build is missing or newer than atlas.json, atlas.json,
     atlas.npz, figures/ and complete.txt are removed (one line on stderr); the next run builds
-    the atlas again.
+    the atlas again. Without atlas.json (atlas_build failed and Snakemake removed its outputs),
+    what is left of an older atlas (complete.txt) goes too.
     """
     import shutil
 
     atlas = Path(ATLAS_OUTPUTS[0])
-    if not atlas.is_file():
-        return
-    built = atlas.stat().st_mtime
-    stale = [
-        p
-        for pattern in ATLAS_INPUTS
-        for p in patient_files(pattern)
-        if not Path(p).exists() or Path(p).stat().st_mtime > built
-    ]
+    had_atlas = atlas.is_file()
+    if had_atlas:
+        built = atlas.stat().st_mtime
+        stale = [
+            p
+            for pattern in ATLAS_INPUTS
+            for p in patient_files(pattern)
+            if not Path(p).exists() or Path(p).stat().st_mtime > built
+        ]
+    else:  # e.g. atlas_build failed (fewer than 3 patients left): no complete.txt of an old run
+        stale = [str(atlas)] if any(Path(out).exists() for out in ATLAS_OUTPUTS[1:]) else []
     if not stale:
         return
     for out in ATLAS_OUTPUTS:
@@ -128,11 +131,12 @@ def drop_stale_atlas():
         elif Path(out).exists():
             Path(out).unlink()
     more = f" and {len(stale) - 1} more" if len(stale) > 1 else ""
-    print(
-        f"vcs-atlas: removed the atlas in results/atlas/: it no longer matches the patients' results "
-        f"({stale[0]}{more} missing or newer than atlas.json); the next run builds it again",
-        file=sys.stderr,
+    why = (
+        f"it no longer matches the patients' results ({stale[0]}{more} missing or newer than atlas.json)"
+        if had_atlas
+        else "what was left of an older atlas (no atlas.json)"
     )
+    print(f"vcs-atlas: removed the atlas in results/atlas/: {why}; the next run builds it again", file=sys.stderr)
 
 
 onstart:
@@ -141,9 +145,9 @@ onstart:
 
 onsuccess:
     write_provenance("success", log)
-    drop_stale_atlas()  # workflow/rules/atlas.smk
+    drop_stale_atlas()
 
 
 onerror:
     write_provenance("failed", log)
-    drop_stale_atlas()  # workflow/rules/atlas.smk
+    drop_stale_atlas()
