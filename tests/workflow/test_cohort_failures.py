@@ -198,3 +198,34 @@ def test_an_atlas_older_than_a_patient_result_is_removed(wd):
     assert "vcs-atlas: removed the atlas in results/atlas/" in r.stdout + r.stderr
     r = _run(wd)  # the next full run builds it again, without the failed patient
     assert r.returncode != 0 and FIT not in _atlas(wd)["patients_included"]
+
+
+def test_failure_records_of_the_shell_rules(tmp_path):
+    """workflow/scripts/_failure.py: a failed command's outputs become the record (reason: the log's
+    last line), an interrupted or missing command stays a job failure, a record is passed on."""
+    sys.path.insert(0, str(REPO / "workflow" / "scripts"))
+    import _failure
+
+    log = tmp_path / "fit.log"
+    log.write_text("vcs fit: error: mesh file 'x.stl' is empty; export the surface again\n")
+    outs = [str(tmp_path / "fit" / "model.json"), str(tmp_path / "fit" / "centerline.vtp")]
+    assert _failure.main(["record", "fit", "2", "--patient", "P1", "--log", str(log), "--", *outs]) == 0
+    for out in outs:
+        record = _failure.read_record(out)
+        assert record["reason"] == "fit failed: mesh file 'x.stl' is empty; export the surface again"
+        assert record["stage"] == "fit" and record["patient"] == "P1" and record["exit_code"] == 2
+    assert log.read_text().splitlines()[-1] == "recorded as a failure of P1 at the fit stage (exit code 2)"
+    for code in (127, 130, 137):  # command not found, interrupted, killed: not this patient's failure
+        other = tmp_path / f"other{code}.json"
+        assert (
+            _failure.main(["record", "fit", str(code), "--patient", "P1", "--log", str(log), "--", str(other)]) == code
+        )
+        assert not other.exists()
+    wall = str(tmp_path / "wall.stl")
+    args = ["propagate", "--patient", "P1", "--log", str(log), "--upstream"]
+    assert _failure.main([*args, str(log), "--", wall]) == 1  # nothing to pass on: run the stage
+    assert _failure.main([*args, outs[0], "--", wall]) == 0
+    assert _failure.read_record(wall) == _failure.read_record(outs[0])
+    np.savez_compressed(tmp_path / "f.npz", a=np.zeros(3))
+    (tmp_path / "result.json").write_text('{"failed": false}')
+    assert _failure.read_record(tmp_path / "f.npz") is None and _failure.read_record(tmp_path / "result.json") is None
