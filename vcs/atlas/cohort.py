@@ -87,7 +87,7 @@ def status_stage(status: Mapping[str, Any] | None) -> str:
     return "solve"
 
 
-def fit_exclusion(report: Mapping[str, Any] | None) -> str | None:
+def fit_failure(report: Mapping[str, Any] | None) -> str | None:
     """Reason to exclude a patient from its ``fit_report.json`` (None: include, or no report).
 
     A fit that failed (the workflow then writes a failure record, ``failed: true``, in place of
@@ -119,7 +119,7 @@ def patient_exclusion(
     accept_relaxed: bool = False,
 ) -> tuple[str, str] | None:
     """(stage, reason) of the first reason to leave a patient out, looked for in its fit report
-    (:func:`fit_exclusion`), its status.json (:func:`status_exclusion`, stage :func:`status_stage`)
+    (:func:`fit_failure`), its status.json (:func:`status_exclusion`, stage :func:`status_stage`)
     and its fields (:func:`fields_exclusion`, stage ``sampling`` unless the fields name another);
     None to include the patient.
 
@@ -134,7 +134,7 @@ def patient_exclusion(
     accept_relaxed : bool
         See :func:`status_exclusion`.
     """
-    reason = fit_exclusion(report)
+    reason = fit_failure(report)
     if reason is not None:
         return str((report or {}).get("stage") or "fit"), reason
     reason = status_exclusion(status, accept_relaxed=accept_relaxed)
@@ -228,7 +228,7 @@ def compute_atlas(
         From each case's status.json; see :func:`status_exclusion`. Patients absent from
         ``statuses`` count as included.
     reports : {patient id: fit_report dict or None}, optional
-        From each fit's fit_report.json; see :func:`fit_exclusion`. The patients are those of
+        From each fit's fit_report.json; see :func:`fit_failure`. The patients are those of
         ``models`` and ``reports`` (in that order); each is excluded with the first reason of
         :func:`patient_exclusion`.
     n_modes : int
