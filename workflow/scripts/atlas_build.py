@@ -41,6 +41,14 @@ def main(smk):
     for field, r in atlas.regression.items():
         if r["status"] != "ok":
             log.warning("shape -> flow regression of %s: %s (%s)", field, r["status"], r["status_reason"])
+    knots = atlas.alignment_report.get("knots") or {}
+    log.info(
+        "cohort knots L=%s K=%s R=%s (fitted L: %s)",
+        knots.get("L"),
+        knots.get("K"),
+        knots.get("R"),
+        knots.get("L_fitted"),
+    )
     log.info("atlas of %d patients (%d excluded) -> %s", len(atlas.patients), len(atlas.excluded), smk.output.json)
 
 
