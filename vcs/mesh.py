@@ -21,6 +21,7 @@ __all__ = [
     "boundary_loops",
     "connected_faces",
     "consistent_winding",
+    "default_vessel_component",
     "edge_topology",
     "half_edges",
     "lumen_chords",
@@ -430,6 +431,40 @@ def connected_faces(faces: NDArray[np.integer], n_vertices: int) -> NDArray[np.i
     graph = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices))
     _, labels = connected_components(graph, directed=False)
     return labels[faces[:, 0]]
+
+
+def default_vessel_component(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], labels: NDArray[np.integer] | None = None
+) -> tuple[int, bool]:
+    """The connected component taken for the vessel when no end point says which.
+
+    Among the (at most ten) largest components by area, the largest with at least two open ends
+    (boundary loops) - a vessel section is a tube -, else the largest: a closed blob of noise
+    larger than the vessel is not taken for it.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        Vertex coordinates.
+    faces : (M, 3) int
+        Triangles.
+    labels : (M,) int, optional
+        Component label of each face (:func:`connected_faces`), computed when not given.
+
+    Returns
+    -------
+    label : int
+        The chosen component's label.
+    not_largest : bool
+        True when a larger component (without two open ends) was passed over.
+    """
+    if labels is None:
+        labels = connected_faces(faces, len(vertices))
+    per = np.bincount(labels, triangle_areas(vertices, faces))
+    by_area = [int(c) for c in np.argsort(-per, kind="stable") if per[c] > 0][:10] or [0]
+    open_tubes = [c for c in by_area if len(boundary_loops(faces[labels == c])) >= 2]
+    pick = open_tubes[0] if open_tubes else by_area[0]
+    return pick, pick != by_area[0]
 
 
 def consistent_winding(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> tuple[NDArray[np.integer], bool]:

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vcs.ends import find_ends, parse_end_option
+from vcs.ends import EndSelector, find_ends, parse_end_option
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
-from vcs.mesh import connected_faces, triangle_areas
+from vcs.mesh import connected_faces, default_vessel_component, triangle_areas
 from vcs.model import VesselCoordinateSystem
 from vcs.wall import WallFit, WallModel, fit_wall
 
@@ -294,18 +294,30 @@ def _check_format_version(d: dict[str, Any]) -> None:
         )
 
 
-def largest_component(surf: Surface) -> Surface:
-    """Keep the connected component of largest area; the others are reported in ``warnings``.
+def vessel_component(
+    surf: Surface, inlet: ArrayLike | EndSelector | None = None, outlet: ArrayLike | EndSelector | None = None
+) -> Surface:
+    """Keep the connected component that is the vessel; the others are reported in ``warnings``.
+
+    Which component: the one nearest the ``inlet`` and ``outlet`` points when points are given
+    (smallest sum of distances to its vertices); the one holding the cap of a ``NAME=VALUE``
+    selector; otherwise, among the components with at least two open ends (boundary loops),
+    the largest by area, and the largest of all when none has two
+    (:func:`vcs.mesh.default_vessel_component`). A closed blob of noise larger
+    than an open vessel is thus not taken for the vessel; between two open tubes, the points
+    decide (the warning says so).
 
     Parameters
     ----------
     surf : Surface
         Triangulated surface (mm).
+    inlet, outlet : (3,) float in mm, EndSelector, or None
+        The parsed ``--inlet``/``--outlet`` (points already converted to mm).
 
     Returns
     -------
     Surface
-        ``surf`` itself when it is connected; otherwise the largest-area component, its unused
+        ``surf`` itself when it is connected; otherwise the chosen component, its unused
         vertices dropped and faces renumbered, cell arrays kept per face, one warning added.
     """
     f = surf.faces
@@ -316,11 +328,34 @@ def largest_component(surf: Surface) -> Surface:
         return surf
     area = triangle_areas(surf.vertices, f)
     per = np.bincount(face_lab, area)
-    keep_lab = int(np.argmax(per))
+    points = [np.asarray(p, float) for p in (inlet, outlet) if isinstance(p, np.ndarray)]
+    labels = [p for p in (inlet, outlet) if isinstance(p, EndSelector) and p.array and p.array in surf.cell_data]
+    if points:
+        from scipy.spatial import cKDTree
+
+        vert_lab = np.full(n, -1)
+        vert_lab[f.ravel()] = np.repeat(face_lab, 3)
+        dist = np.full(len(per), np.inf)
+        for c in used:
+            tree = cKDTree(surf.vertices[vert_lab == c])
+            dist[c] = sum(float(tree.query(p)[0]) for p in points)
+        keep_lab = int(np.argmin(dist))
+        why = "the one nearest --inlet/--outlet"
+    elif labels and np.any(hit := surf.cell_data[str(labels[0].array)] == labels[0].value):
+        keep_lab = int(np.bincount(face_lab[hit]).argmax())
+        why = f"the one with the cap {labels[0].label}"
+    else:
+        keep_lab, not_largest = default_vessel_component(surf.vertices, f, face_lab)
+        if not_largest:
+            why = "the largest with two open ends, not the largest overall; give --inlet/--outlet points to choose"
+        else:
+            why = "the largest; give --inlet/--outlet points to choose another"
     keep = face_lab == keep_lab
+    dropped = np.delete(per, keep_lab)
     msg = (
-        f"{len(used)} disconnected surface components; kept the largest ({keep.sum()} triangles, "
-        f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles"
+        f"{len(used)} disconnected surface components; kept {why} ({int(keep.sum())} triangles, "
+        f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles "
+        f"in {len(used) - 1} other component(s) (the largest {100 * dropped.max() / per.sum():.1f}% of the area)"
     )
     # drop the other components' vertices too: they must not size the voxel grid
     kept_v = np.unique(f[keep])
@@ -387,8 +422,9 @@ def fit_vessel(
 ) -> tuple[VesselModel, dict[str, Any], WallFit | None]:
     """Fit the VCS (and the wall model when K and R are given) to a surface file or :class:`Surface`.
 
-    Reads and cleans the mesh (largest component), finds the two ends (Section 2.2.1), builds the
-    centerline and frame (Sections 2.2.1-2.2.2) and fits rho_w (Section 2.3.1, Eqs. 5-7).
+    Reads and cleans the mesh (the vessel's component, :func:`vessel_component`), finds the two
+    ends (Section 2.2.1), builds the centerline and frame (Sections 2.2.1-2.2.2) and fits rho_w
+    (Section 2.3.1, Eqs. 5-7).
 
     Parameters
     ----------
@@ -423,10 +459,14 @@ def fit_vessel(
     """
     t0 = time.perf_counter()
     surf = mesh if isinstance(mesh, Surface) else read_surface(mesh, units)
-    surf = largest_component(surf)
-    s = surf.scale_to_mm
     p_in = parse_end_option(inlet, "inlet")
     p_out = parse_end_option(outlet, "outlet")
+    s = surf.scale_to_mm
+    surf = vessel_component(
+        surf,
+        p_in * s if isinstance(p_in, np.ndarray) else p_in,
+        p_out * s if isinstance(p_out, np.ndarray) else p_out,
+    )
     if isinstance(p_in, np.ndarray) and isinstance(p_out, np.ndarray) and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
     caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
