@@ -7,6 +7,7 @@ records the factor so outputs can be given back in the units of the input mesh.
 from __future__ import annotations
 
 import logging
+import warnings as pywarnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -452,7 +453,8 @@ def read_table_columns(
     """Read named columns of a CSV (or an (N, len(names)) ``.npy``) as an (N, len(names)) array.
 
     Without ``header_required``, a CSV whose first line does not name the columns is read as
-    headerless, its first ``len(names)`` columns in order.
+    headerless; it must then have exactly ``len(names)`` columns, in order (a fourth column is
+    refused rather than silently ignored). A header may name more columns than ``names``.
 
     Parameters
     ----------
@@ -473,7 +475,9 @@ def read_table_columns(
     Raises
     ------
     VCSInputError
-        For a missing file, missing columns, no data rows, or non-numeric or wrongly shaped data.
+        For a missing file, missing columns, no data rows (an empty CSV, a header-only CSV and an
+        empty ``.npy`` alike), a headerless CSV with another number of columns, NaN or infinite
+        values, or non-numeric or wrongly shaped data.
     """
     path = Path(path)
     if not path.is_file():
@@ -489,10 +493,16 @@ def read_table_columns(
                 raise VCSInputError(
                     f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}"
                 )
-            arr = np.loadtxt(path, delimiter=",", skiprows=0 if missing else 1, ndmin=2)
-            if arr.size == 0:
-                raise VCSInputError(f"'{path}' has no data rows; give at least one row")
-            arr = arr[:, : len(names)] if missing else arr[:, [header.index(n) for n in names]]
+            with pywarnings.catch_warnings():  # an empty file: numpy warns, we say it in one line below
+                pywarnings.simplefilter("ignore")
+                arr = np.loadtxt(path, delimiter=",", skiprows=0 if missing else 1, ndmin=2)
+            if arr.size and missing and arr.shape[1] != len(names):
+                raise VCSInputError(
+                    f"'{path}' has {arr.shape[1]} columns and no header; give exactly {len(names)} columns "
+                    f"({','.join(names)}) or a header line naming them"
+                )
+            if arr.size:
+                arr = arr[:, : len(names)] if missing else arr[:, [header.index(n) for n in names]]
         arr = np.asarray(arr, dtype=float)
     except VCSInputError:
         raise
@@ -500,8 +510,16 @@ def read_table_columns(
         raise VCSInputError(
             f"cannot read '{path}' ({type(exc).__name__}: {exc}); give numeric {','.join(names)} columns"
         ) from None
+    if arr.size == 0:  # the same for an empty CSV, a header-only CSV and an empty .npy
+        raise VCSInputError(f"'{path}' has no data rows; give at least one row of {','.join(names)}")
     if arr.ndim != 2 or arr.shape[1] != len(names):
         raise VCSInputError(f"'{path}' holds an array of shape {arr.shape}; expected {len(names)} columns")
+    bad = ~np.isfinite(arr).all(axis=1)
+    if bad.any():
+        raise VCSInputError(
+            f"'{path}' has {int(bad.sum())} row(s) with NaN or infinite values (first: data row "
+            f"{int(np.argmax(bad)) + 1}); remove or fix them"
+        )
     return arr
 
 

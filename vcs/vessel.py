@@ -216,10 +216,11 @@ class VesselModel:
         Raises
         ------
         VCSInputError
-            When ``format_version`` is not the one this code writes, or the wall model's sizes do
-            not match.
+            When ``format_version`` is not the one this code writes, or an array has the wrong
+            shape or a NaN or infinite value (:func:`_check_arrays`).
         """
         _check_format_version(d)
+        _check_arrays(d)
         wall = None if d.get("wall") is None else WallModel.from_dict(d["wall"])
         return cls(VesselCoordinateSystem.from_dict(d["centerline"]), wall, d["units"]["input"], d.get("meta", {}))
 
@@ -283,6 +284,57 @@ class VesselModel:
             raise VCSInputError(
                 f"'{path}' is not a valid model.json ({type(exc).__name__}: {exc}); refit it with `vcs fit`"
             ) from None
+
+
+def _array(value: Any, what: str, shape: tuple[int | None, ...]) -> NDArray[np.floating]:
+    """``value`` as a finite float array of ``shape`` (None: any length), else VCSInputError naming ``what``."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise VCSInputError(f"{what} is not an array of numbers") from None
+    if a.ndim != len(shape) or any(n is not None and a.shape[i] != n for i, n in enumerate(shape)):
+        want = "(" + ", ".join("n" if n is None else str(n) for n in shape) + ")"
+        raise VCSInputError(f"{what} has shape {a.shape}, expected {want}")
+    n_bad = int((~np.isfinite(a)).sum())
+    if n_bad:
+        raise VCSInputError(f"{what} holds {n_bad} NaN or infinite value(s)")
+    return a
+
+
+def _check_arrays(d: dict[str, Any]) -> None:
+    """Check the arrays of a parsed model.json: shapes that fit together, finite numbers.
+
+    The centerline: ``degree`` 3, ``knots`` clamped on [0, 1] and non-decreasing with L + 8
+    entries, ``control_points`` (L + 4, 3), ``v1_0`` (3,) of unit length; the wall (when present):
+    ``K``, ``R`` >= 1 and ``coefficients`` (K + 4, R + 1). Every number finite (a hand-edited
+    file with a NaN would otherwise fail deep inside a command).
+
+    Raises
+    ------
+    VCSInputError
+        Naming the first entry that is wrong (the caller adds the file name).
+    """
+    c = d["centerline"]
+    if not isinstance(c, dict):
+        raise VCSInputError("'centerline' is not an object")
+    if c.get("degree") != 3:
+        raise VCSInputError(f"centerline degree is {c.get('degree')!r}, expected 3")
+    t = _array(c.get("knots"), "centerline knots", (None,))
+    if len(t) < 8 or np.any(np.diff(t) < 0) or np.any(t[:4] != 0.0) or np.any(t[-4:] != 1.0):
+        raise VCSInputError("centerline knots are not a clamped, non-decreasing knot vector on [0, 1]")
+    _array(c.get("control_points"), "centerline control_points", (len(t) - 4, 3))
+    v1 = _array(c.get("v1_0"), "centerline v1_0", (3,))
+    if abs(float(np.linalg.norm(v1)) - 1.0) > 1e-6:
+        raise VCSInputError(f"centerline v1_0 has length {np.linalg.norm(v1):.6g}, expected a unit vector")
+    w = d.get("wall")
+    if w is None:
+        return
+    if not isinstance(w, dict):
+        raise VCSInputError("'wall' is not an object")
+    K, R = w.get("K"), w.get("R")
+    if not (isinstance(K, int) and isinstance(R, int) and K >= 1 and R >= 1):
+        raise VCSInputError(f"wall K = {K!r}, R = {R!r}: expected integers >= 1")
+    _array(w.get("coefficients"), "wall coefficients", (K + 4, R + 1))
 
 
 def _check_format_version(d: dict[str, Any]) -> None:
