@@ -189,7 +189,7 @@ class VesselCoordinateSystem:
                 "tried": choice.trials,
             }
         if not self.report["centerline_inside_lumen"]:
-            log.warning(
+            log.info(  # in fit_report.json: warnings and quality_reasons (vcs.vessel.fit_vessel)
                 "centerline leaves the voxelised lumen (min distance %.3f mm)",
                 self.report["centerline_min_wall_distance_mm"],
             )

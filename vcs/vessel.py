@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from vcs.ends import EndSelector, find_ends, parse_end_option
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
-from vcs.mesh import connected_faces, default_vessel_component, triangle_areas
+from vcs.mesh import connected_faces, default_vessel_component, self_intersections, triangle_areas
 from vcs.model import VesselCoordinateSystem
 from vcs.wall import WallFit, WallModel, fit_wall
 
@@ -541,14 +541,20 @@ def fit_vessel(
         units=surf.units,
     )
     t_read = time.perf_counter()
-    vcs = VesselCoordinateSystem.from_surface(
-        surf.vertices, surf.faces, ends, n_knots=L, recentre_iterations=recentre_iterations
-    )
-    t_vcs = time.perf_counter()
-    wall_fit = None
-    if K is not None and R is not None:
-        wall_faces = surf.faces[ends.wall_mask]
-        wall_fit = fit_wall(vcs, surf.vertices, wall_faces, K=K, R=R)
+    try:
+        vcs = VesselCoordinateSystem.from_surface(
+            surf.vertices, surf.faces, ends, n_knots=L, recentre_iterations=recentre_iterations
+        )
+        t_vcs = time.perf_counter()
+        wall_fit = None
+        if K is not None and R is not None:
+            wall_faces = surf.faces[ends.wall_mask]
+            wall_fit = fit_wall(vcs, surf.vertices, wall_faces, K=K, R=R)
+    except VCSInputError as exc:  # a surface crossing itself is the cause to name, if it is one
+        crossing = self_intersection_message(surf)
+        if crossing:
+            raise VCSInputError(f"{crossing}; repair the mesh (the fit stopped: {exc})") from None
+        raise
     t_wall = time.perf_counter()
     warnings = [*surf.warnings, *ends.warnings]
     if wall_fit is not None:
@@ -564,6 +570,11 @@ def fit_vessel(
                 f"{n_out} wall points ({100 * n_out / wr['n_wall_points']:.1f}%) are outside Omega "
                 "(lumen radius above the centerline's radius of curvature, or closest point not unique)"
             )
+    if not vcs.report["centerline_inside_lumen"]:
+        warnings.append(
+            f"the centerline leaves the lumen (minimum wall distance "
+            f"{vcs.report['centerline_min_wall_distance_mm']:.3f} mm): the fit is poor, see quality_reasons"
+        )
     if vcs.report.get("L_auto", {}).get("criteria_met") is False:
         warnings.append(
             f"--L auto: no L up to {vcs.report['L_working']} keeps |c'| within 2 % inside the lumen; "
@@ -583,6 +594,13 @@ def fit_vessel(
         report.update(wall_fit.report)
         report.update(wall_quality(wall_fit))
     report.update(fit_quality(report))
+    # a surface crossing itself shows as a poor fit, points outside Omega or not star-convex:
+    # only then is the (0.2-2 s) self-intersection test run
+    if report["quality"] == "poor" or report.get("points_not_used", {}).get("outside_omega"):
+        crossing = self_intersection_message(surf, report)
+        if crossing:
+            warnings.append(crossing)
+            report.update(fit_quality(report))
     report["timings_s"] = {
         "read_and_ends": t_read - t0,
         **vcs.report["timings_s"],
@@ -602,6 +620,35 @@ def fit_vessel(
     }
     model = VesselModel(vcs, None if wall_fit is None else wall_fit.model, surf.units, meta)
     return model, report, wall_fit
+
+
+def self_intersection_message(surf: Surface, report: dict[str, Any] | None = None) -> str | None:
+    """One line saying that (and where) the surface intersects itself, or None when it does not.
+
+    Parameters
+    ----------
+    surf : Surface
+        The vessel's surface (mm).
+    report : dict, optional
+        Fit report: gains ``self_intersecting_triangles`` (a count, 0 when none), which
+        :func:`fit_quality` turns into a quality reason.
+
+    Returns
+    -------
+    str or None
+    """
+    crossing = self_intersections(surf.vertices, surf.faces)
+    if report is not None:
+        report["self_intersecting_triangles"] = int(len(crossing))
+    if not len(crossing):
+        return None
+    s = surf.scale_to_mm
+    c = surf.vertices[surf.faces[crossing]].mean(axis=(0, 1)) / s
+    return (
+        f"the surface intersects itself: {len(crossing)} triangles cross another part of the wall "
+        f"(around ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}) {surf.units}); the lumen, centerline and wall "
+        "model are not reliable there"
+    )
 
 
 #: Limits of :func:`fit_quality` (dimensionless): beyond any of them a fit is ``poor``.
@@ -666,7 +713,8 @@ def wall_quality(wall_fit: WallFit, n_tau: int = 201, n_theta: int = 64) -> dict
 def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) -> dict[str, Any]:
     """``quality`` (``ok`` or ``poor``) and ``quality_reasons`` (one line each) of a fit report.
 
-    A fit is poor when the centerline leaves the lumen or comes within a quarter of the local
+    A fit is poor when the surface intersects itself (``self_intersecting_triangles``, set by
+    :func:`self_intersection_message`), when the centerline leaves the lumen or comes within a quarter of the local
     lumen radius of the wall, when tau is not the arc length of paper Section 2.2.1 (|c'| varies
     by more than 5 %), when the wall model rho_w (Eq. 5) reaches zero or falls below half the
     local lumen radius, when less than a quarter of the wall points between the end planes, or
@@ -688,6 +736,11 @@ def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) 
     """
     lim = {**QUALITY_LIMITS, **(limits or {})}
     why: list[str] = []
+    if report.get("self_intersecting_triangles"):
+        why.append(
+            f"the surface intersects itself ({report['self_intersecting_triangles']} triangles cross another "
+            "part of the wall): repair the mesh"
+        )
     d = report["centerline_min_wall_distance_mm"]
     if not report["centerline_inside_lumen"]:
         why.append(f"the centerline leaves the lumen (minimum wall distance {d:.3f} mm); use more knots (--L auto)")
