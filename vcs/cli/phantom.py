@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from vcs.cli._args import atomic_file, float_at_least, non_negative_int, output_file, write_json
 from vcs.errors import VCSInputError
@@ -33,9 +34,9 @@ def cmd_phantom(args: argparse.Namespace) -> None:
     out = output_file(args.output, suffixes=(".stl",), overwrite=args.overwrite)
     params = None
     if args.params:
-        params = output_file(args.params, out, suffixes=(".json",), overwrite=args.overwrite, option="--params")
-    if params is not None and params.resolve() == out.resolve():
-        raise VCSInputError(f"--params '{args.params}' is the output STL; give another file for the parameters")
+        if Path(args.params).resolve() == out.resolve():
+            raise VCSInputError(f"--params '{args.params}' is the output STL; give another file for the parameters")
+        params = output_file(args.params, suffixes=(".json",), overwrite=args.overwrite, option="--params")
     ph = make_phantom(args.kind, seed=args.seed, resolution=args.resolution)
     with atomic_file(out) as tmp:
         write_stl(ph, tmp)
