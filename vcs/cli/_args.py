@@ -318,13 +318,54 @@ def _temporary_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
 
 
+def remove_leftovers(path: Path) -> list[Path]:
+    """Remove the temporary files of ``path`` left by a run that died while writing (a crash, SIGKILL).
+
+    Only names made by :func:`_temporary_name` whose process no longer exists are removed (a
+    run writing the same output right now keeps its file).
+
+    Parameters
+    ----------
+    path : Path
+        An output file.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(\d+)-[0-9a-f]{8}\.tmp" + re.escape(path.suffix) + "$")
+    removed = []
+    with os.scandir(path.parent) as entries:
+        for e in entries:
+            m = pattern.match(e.name)
+            if m is not None and not _process_exists(int(m.group(1))):
+                Path(e.path).unlink(missing_ok=True)
+                removed.append(Path(e.path))
+    return removed
+
+
+def _process_exists(pid: int) -> bool:
+    """Whether process ``pid`` is running (ours counts)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
+
+
 @contextmanager
 def atomic_file(path: Path) -> Iterator[Path]:
     """Write ``path`` atomically: yield a temporary name in the same directory, then rename it.
 
     On success the temporary file replaces ``path`` (:func:`os.replace`: a reader sees the old
     file or the whole new one, never a part); on any exception (and Ctrl-C) it is removed and
-    ``path`` is left as it was.
+    ``path`` is left as it was. Temporary files of ``path`` left by a run that died are removed
+    first (:func:`remove_leftovers`).
 
     Parameters
     ----------
@@ -335,13 +376,22 @@ def atomic_file(path: Path) -> Iterator[Path]:
     ------
     Path
         Where to write (same directory and extension as ``path``).
+
+    Raises
+    ------
+    VCSInputError
+        The system refused the write (a full disk, a file size limit): one line naming ``path``.
     """
+    remove_leftovers(path)
     tmp = _temporary_name(path)
     try:
         yield tmp
         if not tmp.exists():
             raise RuntimeError(f"nothing was written to {tmp}")
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise VCSInputError(f"cannot write '{path}' ({exc.strerror or exc}); nothing was written") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -382,6 +432,8 @@ class OutputFolder:
         if not self.path.is_dir():
             self.path.mkdir()
             self._created = True
+        for name in self.names:
+            remove_leftovers(self.path / name)
         return self
 
     def file(self, name: str) -> Path:
