@@ -1,7 +1,10 @@
 """The `vcs` command line on bad arguments and bad output paths (issue 14, part B): no abbreviated
 options, -v anywhere, range-checked numbers, output paths checked before any work (exit 2, one
 line, nothing written), out of memory exit 3, atomic outputs, stale outputs of a failed rerun
-removed with a failure record, inputs never overwritten, wall/grid in the model's units."""
+removed with a failure record, inputs never overwritten, wall/grid in the model's units.
+
+The large matrices of argument and path errors run `vcs` in this process (vcs_in_process); what
+needs a real process (resource limits, a crash, the console script's exit) runs it as one."""
 
 from __future__ import annotations
 
@@ -15,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import vcs_in_process
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -136,7 +140,7 @@ def test_numbers_out_of_range_are_usage_errors(fitted, tmp_path, argv, option):
     internal error)."""
     _, mesh, model = fitted
     argv = [a.replace("MODEL", str(model)).replace("MESH", str(mesh)).replace("OUT", str(tmp_path)) for a in argv]
-    one_line_error(run(*argv), f"argument {option}")
+    one_line_error(vcs_in_process(*argv), f"argument {option}")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -235,7 +239,7 @@ def test_bad_output_paths_are_one_line_and_write_nothing(workdir, command, case)
         out, fragment = "afile", "not a directory"  # these write into a directory: a file is the error
     before = snapshot(workdir)
     argv = _commands(workdir, workdir / "m.stl", workdir / "model.json", str(workdir / out))[command]
-    one_line_error(run(*argv), f"vcs {command}: error:", fragment)
+    one_line_error(vcs_in_process(*argv), f"vcs {command}: error:", fragment)
     assert snapshot(workdir) == before and sorted(p.name for p in workdir.iterdir()) == sorted(
         ["m.stl", "model.json", "p.csv", "c.csv", "afile", "adir"]
     )
@@ -255,7 +259,7 @@ def test_bad_output_paths_are_one_line_and_write_nothing(workdir, command, case)
 def test_unknown_output_extension(workdir, command, name, expected):
     before = snapshot(workdir)
     argv = _commands(workdir, workdir / "m.stl", workdir / "model.json", str(workdir / name))[command]
-    one_line_error(run(*argv), f"must end in {expected}")
+    one_line_error(vcs_in_process(*argv), f"must end in {expected}")
     assert snapshot(workdir) == before
 
 
@@ -285,7 +289,7 @@ def test_output_directory_not_writable(workdir, read_only_dir, command):
     """-o in a directory that refuses new files: exit 2, one line naming the directory, before any
     work; nothing written."""
     argv = _commands(workdir, workdir / "m.stl", workdir / "model.json", str(read_only_dir / "out{ext}"))[command]
-    one_line_error(run(*argv), "cannot write to directory", str(read_only_dir))
+    one_line_error(vcs_in_process(*argv), "cannot write to directory", str(read_only_dir))
     assert list(read_only_dir.iterdir()) == []
 
 
