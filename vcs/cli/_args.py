@@ -55,8 +55,8 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
     return parse
 
 
-def float_at_least(minimum: float, *, strict: bool = False) -> Callable[[str], float]:
-    """An argparse ``type``: the argument as a finite float that must be >= ``minimum`` (> when ``strict``).
+def float_at_least(minimum: float, *, strict: bool = False, maximum: float | None = None) -> Callable[[str], float]:
+    """An argparse ``type``: the argument as a finite float >= ``minimum`` (> when ``strict``), <= ``maximum``.
 
     Parameters
     ----------
@@ -64,6 +64,8 @@ def float_at_least(minimum: float, *, strict: bool = False) -> Callable[[str], f
         Smallest accepted value.
     strict : bool
         Refuse ``minimum`` itself (for sizes that must be positive).
+    maximum : float, optional
+        Largest accepted value.
 
     Returns
     -------
@@ -82,6 +84,8 @@ def float_at_least(minimum: float, *, strict: bool = False) -> Callable[[str], f
             raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
         if v < minimum or (strict and v == minimum):
             raise argparse.ArgumentTypeError(f"{v:g} must be {'>' if strict else '>='} {minimum:g}")
+        if maximum is not None and v > maximum:
+            raise argparse.ArgumentTypeError(f"{v:g} must be <= {maximum:g}")
         return v
 
     return parse

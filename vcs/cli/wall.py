@@ -122,12 +122,9 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     w.add_argument("-o", "--output", required=True, help="output .stl")
     w.add_argument("--n-tau", type=positive_int, default=None, help="axial intervals (default: square quads)")
     w.add_argument("--n-theta", type=int_at_least(8), default=64, help="vertices around the circumference (>= 8)")
-    w.add_argument(
-        "--extend-inlet", type=float_at_least(0.0), default=0.0, help="straight inlet extension, in diameters (>= 0)"
-    )
-    w.add_argument(
-        "--extend-outlet", type=float_at_least(0.0), default=0.0, help="straight outlet extension, in diameters (>= 0)"
-    )
+    extension = float_at_least(0.0, maximum=100.0)
+    w.add_argument("--extend-inlet", type=extension, default=0.0, help="straight inlet extension, 0-100 diameters")
+    w.add_argument("--extend-outlet", type=extension, default=0.0, help="straight outlet extension, 0-100 diameters")
     w.add_argument(
         "--units",
         default=None,
