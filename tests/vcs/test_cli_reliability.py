@@ -362,6 +362,24 @@ def test_a_crash_while_writing_leaves_the_old_output_whole(fitted, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.vtu"] and old.read_bytes() != before
 
 
+def test_a_crash_while_writing_a_fit_leaves_the_earlier_fit_whole(fitted, tmp_path):
+    """`vcs fit` writes its files under temporary names and puts them in place together at the end:
+    a refit killed while writing (VTK aborts at the file size limit) leaves the earlier fit's
+    files as they were (not a new centerline.vtp beside an old model.json); the next run removes
+    the dead run's temporary files."""
+    _, mesh, _ = fitted
+    out = tmp_path / "fit"
+    assert run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7").returncode == 0
+    before = snapshot(out)
+    r = run("fit", mesh, "-o", out, "--units", "cm", "--K", "5", "--R", "5", "--L", "12", preexec_fn=_limit_file_size)
+    assert r.returncode != 0
+    visible = {n: b for n, b in snapshot(out).items() if not n.startswith(".")}
+    assert visible == before
+    assert run("fit", mesh, "-o", out, "--units", "cm", "--K", "5", "--R", "5").returncode == 0
+    after = snapshot(out)
+    assert sorted(after) == sorted(before) and after["model.json"] != before["model.json"]
+
+
 def test_a_failed_refit_removes_the_stale_fit_and_says_so(fitted, tmp_path):
     """A fit, then a failed refit into the same folder: the earlier model.json & co. are removed
     and fit_failed.json holds the error and what was removed; a later good fit removes the record.
@@ -372,6 +390,10 @@ def test_a_failed_refit_removes_the_stale_fit_and_says_so(fitted, tmp_path):
     assert r.returncode == 0, r.stderr
     outputs = ["centerline.vtp", "fit_report.json", "model.json", "residual_map.png", "wall_residuals.vtp"]
     assert sorted(p.name for p in out.iterdir()) == outputs
+    assert run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7").returncode == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted(set(outputs) - {"residual_map.png"})
+    r = run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7", "--residual-png")
+    assert r.returncode == 0, r.stderr
     r = run("fit", mesh, "-o", out, "--units", "cm", "--inlet", "0,0,5", "--outlet", "0,0,5.01")
     msg = one_line_error(r, "vcs fit: error:")
     assert sorted(p.name for p in out.iterdir()) == ["fit_failed.json"]
