@@ -328,14 +328,15 @@ def test_out_of_memory_is_exit_3_not_bad_input(fitted, tmp_path):
 
 
 def _limit_file_size():
-    """preexec_fn: no file may grow beyond 64 kB (writes past it fail with EFBIG: Python ignores SIGXFSZ)."""
-    resource.setrlimit(resource.RLIMIT_FSIZE, (64 << 10, 64 << 10))
+    """preexec_fn: no file may grow beyond 16 kB (writes past it fail with EFBIG: Python ignores
+    SIGXFSZ). The outputs below are far larger: a wall STL several MB, centerline.vtp ~57 kB."""
+    resource.setrlimit(resource.RLIMIT_FSIZE, (16 << 10, 16 << 10))
 
 
 def test_a_failed_write_leaves_the_old_output_whole(fitted, tmp_path):
-    """The wall STL (several MB) cannot be written under a 64 kB file size limit: exit 2, one line,
+    """The wall STL (several MB) cannot be written under a 16 kB file size limit: exit 2, one line,
     and the earlier wall.stl is still there byte for byte, with no temporary file beside it (a
-    writer that wrote straight into wall.stl would have left 64 kB of a new one)."""
+    writer that wrote straight into wall.stl would have left 16 kB of a new one)."""
     _, _, model = fitted
     old = tmp_path / "wall.stl"
     assert run("wall", model, "-o", old, "--n-theta", "32").returncode == 0
