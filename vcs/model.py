@@ -151,7 +151,12 @@ class VesselCoordinateSystem:
         working = fit_centerline(pts, L_work, end_directions=dirs, smoothing_mm=ell)
         t_fit = time.perf_counter()
         shifts: list[float] = []
-        if recentre_iterations > 0:
+        data = pts
+        short = path_len < 2.0 * radius
+        if short:  # no longer than its diameter: no room for a bend, and too few voxels to follow
+            data = inlet.center + np.linspace(0.0, 1.0, 17)[:, None] * (outlet.center - inlet.center)
+            working = fit_centerline(data, L_work, end_directions=dirs)
+        elif recentre_iterations > 0:
             working, shifts, _ = section_centres(
                 working,
                 vertices,
@@ -165,10 +170,10 @@ class VesselCoordinateSystem:
         if auto:
             choice = choose_n_knots(working, lumen, end_directions=dirs, max_knots=max(9, L_work))
             curve = choice.curve
-        elif recentre_iterations > 0:
+        elif recentre_iterations > 0 and not short:
             curve = fit_to_curve(working, int(n_knots), end_directions=dirs)
-        else:  # the paper's curve: least squares to the lumen path
-            curve = fit_centerline(pts, int(n_knots), end_directions=dirs)
+        else:  # the paper's curve: least squares to the lumen path (a short section: its chord)
+            curve = fit_centerline(data, int(n_knots), end_directions=dirs)
         t_choose = time.perf_counter()
         v1_0, how = initial_v1_from_wall(curve, wall_centroid(vertices, wall_faces))
         self = cls(curve, v1_0, v1_0_from=how)
@@ -188,6 +193,7 @@ class VesselCoordinateSystem:
             L_source="auto" if auto else "given",
             L_working=int(L_work),
             centerline_smoothing_mm=ell,
+            short_section=bool(short),
         )
         if choice is not None:
             self.report["L_auto"] = {
@@ -197,7 +203,7 @@ class VesselCoordinateSystem:
                 "tried": choice.trials,
             }
         if not self.report["centerline_inside_lumen"]:
-            log.warning(
+            log.info(  # in fit_report.json: warnings and quality_reasons (vcs.vessel.fit_vessel)
                 "centerline leaves the voxelised lumen (min distance %.3f mm)",
                 self.report["centerline_min_wall_distance_mm"],
             )

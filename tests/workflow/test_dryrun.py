@@ -20,7 +20,7 @@ def chain(rules, ids=IDS):
     return {(r, i) for r in rules for i in ids}
 
 
-COHORT = {("atlas_build", None), ("all", None)}
+COHORT = {("atlas_build", None), ("atlas_complete", None), ("all", None)}
 
 
 def test_fresh_cohort_plans_every_stage_once_per_patient(cohort):
@@ -103,6 +103,14 @@ def test_adding_a_patient_runs_its_chain_and_the_atlas(cohort):
         ]
     )
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P4"]) | COHORT
+
+
+def test_sheet_saved_with_a_utf8_bom_is_read(cohort):
+    """Excel's "UTF-8 CSV" starts the file with a byte-order mark: it is not part of the header."""
+    sheet = cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"}])
+    body = sheet.read_text().split("\n", 1)[1]  # no comment line: the BOM sits right before `id`
+    sheet.write_bytes(b"\xef\xbb\xbf" + body.encode())
+    assert cohort.planned_jobs() == chain(PER_PATIENT, ["P1"]) | COHORT
 
 
 def test_mesh_path_with_spaces_is_quoted(cohort):

@@ -66,9 +66,10 @@ def _sheet_rows(path):
     sheet = Path(path)
     if not sheet.is_file():
         fail(f"patients sheet '{path}' not found; set `patients:` in the config to an existing TSV")
+    # utf-8-sig: the byte-order mark of Excel's "UTF-8 CSV" is not part of the header
     lines = [
         (n, line)
-        for n, line in enumerate(sheet.read_text(encoding="utf-8").splitlines(), start=1)
+        for n, line in enumerate(sheet.read_text(encoding="utf-8-sig").splitlines(), start=1)
         if line.strip() and not line.lstrip().startswith("#")
     ]
     if not lines:
