@@ -26,7 +26,7 @@ from scipy.interpolate import BSpline
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
-from vcs.coords import CurveIndex, to_vcs
+from vcs.coords import CurveIndex, curvature, to_vcs
 from vcs.ends import End, Ends
 from vcs.errors import VCSInputError
 from vcs.frame import ParallelTransportFrame, initial_v1
@@ -507,6 +507,7 @@ def _lsq_fixed_ends(
     d0: ArrayLike | None = None,
     d1: ArrayLike | None = None,
     smoothing: float = 0.0,
+    bend: NDArray[np.floating] | None = None,
 ) -> BSpline:
     """Least-squares cubic B-spline through data (u, pts) with c(0) = p0 and c(1) = p1, and, when
     the unit directions ``d0``/``d1`` are given, c'(0) parallel to d0 and c'(1) parallel to d1.
@@ -518,13 +519,16 @@ def _lsq_fixed_ends(
     well-posed.
 
     ``smoothing`` > 0 (a length relative to the curve's, ell / S) adds the smoothing-spline
-    penalty N (ell / S)^6 int |c'''(tau)|^2 dtau (N data; c''' is constant on each knot span, so
-    the integral is exact). The data term is ~ N int |c - p|^2 dtau, so a wiggle of wavelength
-    2 pi ell keeps half its amplitude, shorter ones are damped as (2 pi ell / wavelength)^6,
-    longer ones (the bends of a vessel) are kept, and gaps in the data are bridged with the least
-    change of curvature. (Third differences of the control points would penalise a straight
-    line at uniform speed next to the clamped ends, whose control points are not uniformly
-    spaced: on a torus arc that bent the curve's ends, curvature 17 % off.)
+    penalty N (ell / S)^6 int |c''' + a c'|^2 dtau (N data; 4 Gauss points per knot span, exact
+    for a = 0). The data term is ~ N int |c - p|^2 dtau, so a wiggle of wavelength 2 pi ell keeps
+    half its amplitude, shorter ones are damped as (2 pi ell / wavelength)^6, longer ones (the
+    bends of a vessel) are kept, and gaps in the data are bridged with the least change of
+    curvature. ``bend`` gives a(tau) = S^2 kappa^2 on equally spaced tau (kappa the curvature
+    of a reference curve, 1/mm): for a curve at uniform speed S, c''' = S^3 (kappa' n + kappa
+    torsion b) - S^2 kappa^2 c', so arcs of that curvature cost nothing (c''' alone pulled a
+    12 mm bend of a 10 mm tube 0.14 mm outwards). (Third differences of the control points would
+    penalise a straight line at uniform speed next to the clamped ends, whose control points are
+    not uniformly spaced: on a torus arc that bent the curve's ends, curvature 17 % off.)
     """
     B = BSpline.design_matrix(u, t, 3)
     n = B.shape[1]
@@ -556,10 +560,17 @@ def _lsq_fixed_ends(
     D = np.diff(np.eye(n), 2, axis=0)
     lam = smooth * len(u)
     M = (B.T @ B).toarray() + lam * (D.T @ D)
-    if smoothing > 0:  # exact int |c'''|^2 dtau: c''' is constant on each knot span
+    if smoothing > 0:  # int |c''' + a c'|^2 dtau by 4-point Gauss-Legendre per knot span
         edges = np.unique(t)
-        third = BSpline(t, np.eye(n), 3).derivative(3)(0.5 * (edges[1:] + edges[:-1]))  # (spans, n)
-        M += len(u) * smoothing**6 * (third.T * np.diff(edges)) @ third
+        gx, gw = np.polynomial.legendre.leggauss(4)
+        q = (0.5 * (edges[1:] + edges[:-1])[:, None] + 0.5 * np.diff(edges)[:, None] * gx).ravel()
+        qw = (0.5 * np.diff(edges)[:, None] * gw).ravel()
+        basis = BSpline(t, np.eye(n), 3)
+        A = basis.derivative(3)(q)  # (points, n)
+        if bend is not None:  # a = S^2 kappa^2 (tau): arcs of that curvature are not penalised
+            a = np.interp(q, np.linspace(0.0, 1.0, len(bend)), bend)
+            A = A + a[:, None] * basis.derivative(1)(q)
+        M += len(u) * smoothing**6 * (A.T * qw) @ A
     rhs_c = np.asarray(B.T @ pts) - M @ C0  # (n, 3)
     Gk = G.transpose(1, 0, 2)  # (3, n, nz)
     H = np.einsum("knz,kny->zy", Gk, M @ Gk)
@@ -590,6 +601,7 @@ def fit_spline(
     *,
     end_directions: tuple[ArrayLike, ArrayLike] | None = None,
     smoothing_mm: float = 0.0,
+    reference: BSpline | None = None,
 ) -> BSpline:
     """Least-squares cubic B-spline through ordered points, end points held (paper Section 2.2.1, Eq. 1).
 
@@ -607,8 +619,12 @@ def fit_spline(
         Unit tangent directions imposed at u = 0 and 1 (:func:`end_tangents`), so that the normal
         planes of the curve at its ends are the end planes themselves.
     smoothing_mm : float, mm
-        Smoothing length ell of the P-spline penalty (:func:`_lsq_fixed_ends`; 0: none): wiggles of
-        the points shorter than 2 pi ell are damped.
+        Smoothing length ell of the penalty (:func:`_lsq_fixed_ends`; 0: none): wiggles of the
+        points shorter than 2 pi ell are damped.
+    reference : BSpline or None
+        A curve along the points (mm) whose curvature kappa(tau) the penalty leaves alone: the
+        penalty is then on c''' + S^2 kappa^2 c', zero on arcs of that curvature, instead of on
+        c''', which also straightens a circular bend a little (by (kappa ell)^4 or so).
 
     Returns
     -------
@@ -628,12 +644,17 @@ def fit_spline(
     if u[-1] <= 0:
         raise VCSInputError("the inlet and outlet are at the same place; give two distinct ends")
     smoothing = smoothing_mm / u[-1]
+    bend = None
+    if reference is not None and smoothing_mm > 0:
+        bend = (u[-1] * curvature(reference, np.linspace(0.0, 1.0, 201))) ** 2
     u /= u[-1]
     if len(pts) < 8:  # a section a few voxels long: the polyline itself, sampled densely enough
         u_new = np.linspace(0.0, 1.0, 8)
         pts, u = np.column_stack([np.interp(u_new, u, pts[:, k]) for k in range(3)]), u_new
     d0, d1 = end_directions if end_directions is not None else (None, None)
-    return _lsq_fixed_ends(u, pts, uniform_knots(n_knots), pts[0], pts[-1], d0=d0, d1=d1, smoothing=smoothing)
+    return _lsq_fixed_ends(
+        u, pts, uniform_knots(n_knots), pts[0], pts[-1], d0=d0, d1=d1, smoothing=smoothing, bend=bend
+    )
 
 
 def reparametrise_by_arc_length(
@@ -715,6 +736,7 @@ def fit_centerline(
     n_resample: int = 2000,
     end_directions: tuple[ArrayLike, ArrayLike] | None = None,
     smoothing_mm: float = 0.0,
+    reference: BSpline | None = None,
 ) -> BSpline:
     """Cubic B-spline centerline with ``n_knots`` uniform interior knots, arc-length parametrised.
 
@@ -733,13 +755,15 @@ def fit_centerline(
         Unit tangent directions imposed at tau = 0 and 1 (the end planes' normals, along the flow).
     smoothing_mm : float, mm
         Smoothing length of the fit (:func:`fit_spline`; 0: plain least squares).
+    reference : BSpline or None
+        Curve whose curvature the smoothing leaves alone (:func:`fit_spline`).
 
     Returns
     -------
     BSpline
         c(tau), tau in [0, 1] the normalised arc length; control points (L + 4, 3) in mm.
     """
-    curve = fit_spline(points, n_knots, end_directions=end_directions, smoothing_mm=smoothing_mm)
+    curve = fit_spline(points, n_knots, end_directions=end_directions, smoothing_mm=smoothing_mm, reference=reference)
     return reparametrise_by_arc_length(curve, end_directions=end_directions, n_resample=n_resample)
 
 
@@ -1274,7 +1298,7 @@ def recentre_step(
         data = np.vstack([p0, (curve(tb) + shift)[good][order], p1])
     else:  # almost nothing votes: keep the curve
         data = np.vstack([p0, curve((np.arange(n_bins) + 0.5) / n_bins), p1])
-    fitted = fit_centerline(data, n_knots, end_directions=dirs, smoothing_mm=smoothing_mm)
+    fitted = fit_centerline(data, n_knots, end_directions=dirs, smoothing_mm=smoothing_mm, reference=curve)
     return fitted, float(np.linalg.norm(shift, axis=1).max(initial=0.0)), data
 
 
