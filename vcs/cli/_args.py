@@ -478,7 +478,10 @@ class OutputFolder:
         for name in stale:
             (self.path / name).unlink()
         if stale or self.record.is_file():
-            error = str(exc) if isinstance(exc, Exception) and str(exc) else type(exc).__name__
+            if isinstance(exc, KeyboardInterrupt):
+                error = "interrupted (Ctrl-C)"
+            else:
+                error = str(exc) or type(exc).__name__
             record = {
                 "command": f"vcs {self.command}",
                 "error": error,
