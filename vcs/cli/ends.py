@@ -16,7 +16,8 @@ _DECIMALS = {"mm": 2, "cm": 3, "m": 5}
 def ends_table(mesh: str | Path, units: str = "auto", cap_array: str | None = "auto") -> dict[str, Any]:
     """The candidate ends of a surface, as `vcs ends` prints and writes them (JSON-ready).
 
-    The surface is read and reduced to its largest component exactly as `vcs fit` does, so
+    The surface is read and reduced to the vessel's component exactly as `vcs fit` does
+    with no end option (:func:`vcs.vessel.vessel_component`), so
     ``end:N`` here is ``end:N`` there.
 
     Parameters
@@ -45,9 +46,9 @@ def ends_table(mesh: str | Path, units: str = "auto", cap_array: str | None = "a
     """
     from vcs.ends import list_ends
     from vcs.io import read_surface
-    from vcs.vessel import largest_component
+    from vcs.vessel import vessel_component
 
-    surf = largest_component(read_surface(mesh, units))
+    surf = vessel_component(read_surface(mesh, units))
     listing = list_ends(
         surf.vertices, surf.faces, surf.cell_data, cap_array=cap_array, lumen_radius=surf.lumen_radius_mm
     )
