@@ -3,7 +3,9 @@
 * ASCII ``constant/polyMesh`` reader for boundary patches (face centres / area vectors)
 * solver-log parser (initial residuals, continuity errors, convergence message, time units of
   openfoam.org 10+) and banner parser (both families, solver logs and ``-help``)
-* ``postProcessing/*/*.dat`` reader (surfaceFieldValue output)
+* ``postProcessing/*/*.dat`` reader (surfaceFieldValue output), time-weighted window means
+* ASCII field readers (internalField, a patch's value), snappyHexMesh's prism-layer report,
+  checkMesh's volume, and the oscillatory shear index of time-averaged wall shear stress
 """
 
 from __future__ import annotations
@@ -513,33 +515,6 @@ def last_function_value(case_dir: Path | str, name: str) -> float | None:
     return None
 
 
-def mean_function_value(case_dir: Path | str, name: str, after: float) -> float | None:
-    """Mean value written by a function object after a given time (the fallback's averaging window).
-
-    Parameters
-    ----------
-    case_dir : Path or str
-        The OpenFOAM case.
-    name : str
-        Function-object name (``postProcessing/<name>/*/*.dat``).
-    after : float
-        Only rows with time (iteration) > ``after`` count.
-
-    Returns
-    -------
-    float or None
-        Mean of the second column (the function's units); None when no row qualifies.
-    """
-    root = Path(case_dir) / "postProcessing" / name
-    rows = [read_dat(f) for f in root.glob("*/*.dat")]
-    rows = [r for r in rows if r.shape[0] and r.shape[1] >= 2]
-    if not rows:
-        return None
-    arr = np.concatenate([r[:, :2] for r in rows])
-    sel = arr[arr[:, 0] > after]
-    return float(sel[:, 1].mean()) if sel.shape[0] else None
-
-
 def function_series(case_dir: Path | str, name: str) -> NDArray[np.floating]:
     """Time series (time, value) written by a function object, over all its start-time folders.
 
@@ -757,6 +732,26 @@ def parse_layer_summary(text: str) -> dict[str, Any]:
             except ValueError:
                 break
     return out
+
+
+def oscillatory_shear_index(mean_wss: NDArray[np.floating], tawss: NDArray[np.floating]) -> NDArray[np.floating]:
+    """OSI = (1 - |time average of WSS| / time average of |WSS|) / 2, per wall face.
+
+    Parameters
+    ----------
+    mean_wss : (n, 3) float
+        Time-averaged WSS vectors (any stress unit, e.g. kinematic m^2/s^2).
+    tawss : (n,) float
+        Time-averaged WSS magnitudes (TAWSS), same unit.
+
+    Returns
+    -------
+    (n,) float
+        OSI in [0, 0.5] (dimensionless); 0 where TAWSS is 0.
+    """
+    m = np.linalg.norm(mean_wss, axis=1)
+    ratio = np.divide(m, tawss, out=np.ones_like(m), where=tawss > 0)
+    return np.clip(0.5 * (1.0 - ratio), 0.0, 0.5)
 
 
 def _isnum(s: str) -> bool:

@@ -23,6 +23,7 @@ from vcs.cfd.case import CASE_JSON, inlet_profile, patch_role, render_files
 from vcs.cfd.foamfiles import (
     function_series,
     last_function_value,
+    oscillatory_shear_index,
     parse_check_mesh_volume,
     parse_layer_summary,
     parse_solver_log,
@@ -912,23 +913,3 @@ def _collect(
                 status["osi"] = {"mean": float((osi * a).sum() / a.sum()), "max": float(osi.max())}
         except Exception as exc:  # noqa: BLE001
             status["wall_shear_stress_Pa"] = {"error": str(exc)}
-
-
-def oscillatory_shear_index(mean_wss: NDArray[np.floating], tawss: NDArray[np.floating]) -> NDArray[np.floating]:
-    """OSI = (1 - |time average of WSS| / time average of |WSS|) / 2, per wall face.
-
-    Parameters
-    ----------
-    mean_wss : (n, 3) float
-        Time-averaged WSS vectors (any stress unit, e.g. kinematic m^2/s^2).
-    tawss : (n,) float
-        Time-averaged WSS magnitudes (TAWSS), same unit.
-
-    Returns
-    -------
-    (n,) float
-        OSI in [0, 0.5] (dimensionless); 0 where TAWSS is 0.
-    """
-    m = np.linalg.norm(mean_wss, axis=1)
-    ratio = np.divide(m, tawss, out=np.ones_like(m), where=tawss > 0)
-    return np.clip(0.5 * (1.0 - ratio), 0.0, 0.5)
