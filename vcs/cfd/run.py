@@ -345,7 +345,7 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         )
         if sol.get("fallback") == "transient":
             transient = _transient_fallback(case_dir, state, status, run, ranks, prof)
-    if ranks > 1 and transient is None:
+    if ranks > 1 and not (transient and transient.get("evaluated")):  # the transient reconstructed its own
         if run(["reconstructPar", "-latestTime"], "reconstructPar").returncode != 0:
             return finish(
                 (status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed", "reconstructPar"
