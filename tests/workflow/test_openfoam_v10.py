@@ -195,6 +195,38 @@ def test_time_line_units(tmp_path, line, time, unit):
     assert out["rows"][0]["p"] == 0.5 and out["time_unit"] == unit and out["ended"]
 
 
+def v10_pimple_log(start: float = 20.0, steps: int = 4) -> str:
+    """A transient stage of OpenFOAM-10's pimpleFoam restarted at ``start``.
+
+    pimpleFoam.C: CourantNo.H ("Courant Number mean: ... max: ...",
+    src/finiteVolume/cfdTools/incompressible/CourantNo.H) and setInitialDeltaT.H before the time
+    loop (the restart's time step, no deltaT line); in the loop CourantNo.H, setDeltaT.H
+    ("deltaT = ...", src/finiteVolume/cfdTools/general/include/setDeltaT.H), then "Time = " +
+    runTime.userTimeName() (unit "s"), the solver lines, ExecutionTime/ClockTime; "End".
+    """
+    parts = [V10_HEADER.replace("Create mesh for time = 100", f"Create mesh for time = {start:g}")]
+    parts.append("Courant Number mean: 50.1 max: 2500.5\n\nStarting time loop\n\n")
+    t, dt = start, 4e-4
+    for i in range(steps):
+        dt *= 1.1 if i else 1.0
+        t += dt
+        parts.append(f"Courant Number mean: 0.08 max: {0.9 + 0.02 * i:.3f}\ndeltaT = {dt:.10g}\n")
+        parts.append(_v10_iteration(0, 1e-3, 1e-6).replace("Time = 0s", f"Time = {t:.10g}s"))
+    parts.append("End\n\n")
+    return "".join(parts)
+
+
+def test_v10_pimple_log_courant_and_time_steps(tmp_path):
+    log = tmp_path / "log.pimpleFoam.average"
+    log.write_text(v10_pimple_log())
+    out = parse_solver_log(log)
+    assert out["time_unit"] == "s" and len(out["rows"]) == 4 and out["ended"]
+    assert out["rows"][0]["time"] == pytest.approx(20.0004) and out["rows"][-1]["p"] == pytest.approx(0.8e-3)
+    # the Courant number before the loop is the restart's time step (none was taken with it)
+    assert out["courant_max"] == pytest.approx(0.96)
+    assert out["delta_t_min"] == pytest.approx(4e-4) and out["delta_t_max"] == pytest.approx(4e-4 * 1.1**3)
+
+
 def test_banner_time_line_is_not_an_iteration(tmp_path):
     # argList.C prints "Time   : 15:22:46" in the header: not a solver time line
     log = tmp_path / "log"
