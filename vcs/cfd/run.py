@@ -178,8 +178,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
 
     Steps: blockMesh, snappyHexMesh -overwrite (jet refinement cylinder, wall prism layers),
     checkMesh (failure stops), inlet profile, [decomposePar], simpleFoam start-up (first order)
-    then main stage (residualControl). If SIMPLE does not converge and ``solver.fallback`` is
-    ``transient``: pimpleFoam from the SIMPLE state (adjustable time step at Courant number <=
+    then main stage (residualControl). If SIMPLE does not converge (or diverges: floating point
+    exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
+    written (after a divergence, the start-up's) (adjustable time step at Courant number <=
     ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
     ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
     wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
@@ -320,12 +321,16 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = parse_solver_log(logs[-1])
     status["solver_log"] = _log_summary(main, logs[-1])
+    diverged = None  # SIMPLE's divergence, when the transient fallback takes over from it
     if r.returncode != 0:
-        _collect(case_dir, status, logs, state)
-        return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
+        failure = _solver_failure(logs[-1], "main")
+        if sol.get("fallback") != "transient" or "diverged" not in failure:
+            _collect(case_dir, status, logs, state)
+            return finish(failure, "simpleFoam")
+        diverged = failure  # steady SIMPLE blew up; an unsteady flow may still have a time average
     last = main["rows"][-1] if main["rows"] else {}
     tol = float(sol["tolerance"])
-    if not last and not main["converged_message"]:
+    if diverged is None and not last and not main["converged_message"]:
         # nothing to judge convergence on, and nothing to start a transient run from: say so
         _collect(case_dir, status, logs, state)
         return finish(
@@ -333,16 +338,21 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
             "none with residuals): unrecognised solver output, convergence unknown; fallback not run",
             "simpleFoam",
         )
-    converged = bool(main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
+    converged = diverged is None and bool(
+        main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol)
+    )
     status["converged"] = converged
     status["criterion_used"] = "residualControl" if converged else "none"
     status["fields"] = {"U": "U", "p": "p", "WSS": "wallShearStress", "time_averaged": False}
     transient: dict[str, Any] | None = None
     if not converged:
-        status["reason"] = (
-            f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
-            f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
-        )
+        if diverged is not None:  # the transient starts from the last state SIMPLE wrote (its start-up's)
+            status["reason"] = diverged
+        else:
+            status["reason"] = (
+                f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
+                f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
+            )
         if sol.get("fallback") == "transient":
             transient = _transient_fallback(case_dir, state, status, run, ranks, prof)
     if ranks > 1 and not (transient and transient.get("evaluated")):  # the transient reconstructed its own
