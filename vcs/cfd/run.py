@@ -11,6 +11,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -39,6 +40,35 @@ from vcs.cfd.openfoam import detect_openfoam, foam_env
 STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
 
 
+def _run_group(
+    cmd: list[str], cwd: Path, env: dict[str, str], out: Any, timeout: float | None
+) -> subprocess.CompletedProcess[bytes]:
+    """Run ``cmd`` in its own process group and wait; on a timeout, Ctrl-C (KeyboardInterrupt) or
+    any other exit of the caller, stop the WHOLE group (mpirun and every rank: SIGTERM, then
+    SIGKILL after 5 s) before re-raising, so that no solver keeps running after its job ended."""
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=timeout))
+    except BaseException:
+        stop_group(proc)
+        raise
+
+
+def stop_group(proc: subprocess.Popen[bytes]) -> None:
+    """SIGTERM to the process group of ``proc`` (started with ``start_new_session``), SIGKILL
+    after 5 s if it is still there."""
+    for sig, grace in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(timeout=grace)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+
+
 class _Runner:
     """Runs OpenFOAM utilities in a case, each logged to ``logs/log.<name>`` and timed."""
 
@@ -52,7 +82,9 @@ class _Runner:
 
     def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess[bytes]:
         """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9,
-        an executable that cannot be started 127 (never raises)."""
+        an executable that cannot be started 127. Never raises, except when the caller is interrupted
+        (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the workflow scripts): then the
+        utility's whole process group is stopped first."""
         cmd = list(args)
         if ranks > 1:
             mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
@@ -67,9 +99,7 @@ class _Runner:
             fh.write(f"# {' '.join(cmd)}\n")
             fh.flush()
             try:
-                r = subprocess.run(
-                    cmd, cwd=self.case, env=self.env, stdout=fh, stderr=subprocess.STDOUT, timeout=self.timeout
-                )
+                r = _run_group(cmd, self.case, self.env, fh, self.timeout)
             except subprocess.TimeoutExpired:
                 r = subprocess.CompletedProcess(cmd, returncode=-9)
                 fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
