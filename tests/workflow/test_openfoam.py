@@ -360,6 +360,29 @@ def test_render_jet_mesh_and_transient_stages(tmp_path, flavour):
     assert "fieldAverage" not in txt and "timeStep)" not in txt.replace("writeControl    timeStep", "")
 
 
+def test_paper_config_is_the_papers_jet(tmp_path):
+    """config/paper.yaml over config/config.yaml (as ``--configfile`` merges it) is valid and is the
+    paper's set-up (Section 2.4.1): 1.2 m/s over 1 cm2 (Q 1.2e-4 m3/s), nu 3.37e-6 m2/s, steady
+    SIMPLE to 1e-5 first, the transient time average over >= 5 flow-through times otherwise."""
+    import yaml
+    from snakemake.utils import validate
+
+    repo = Path(__file__).resolve().parents[2]
+    cfg = deep_merge(
+        yaml.safe_load((repo / "config" / "config.yaml").read_text()),
+        yaml.safe_load((repo / "config" / "paper.yaml").read_text()),
+    )
+    validate(cfg, str(repo / "workflow" / "schemas" / "config.schema.yaml"))
+    cfd = cfg["cfd"]
+    assert cfd["inlet"] == {**cfd["inlet"], "type": "jet", "velocity": 1.2, "valve_area": 1.0e-4, "flow_rate": None}
+    assert cfd["physics"]["nu"] == pytest.approx(3.37e-6) and cfd["solver"]["tolerance"] == pytest.approx(1e-5)
+    assert cfd["solver"]["fallback"] == "transient" and cfd["solver"]["transient"]["flow_throughs"] >= 5
+    assert cfd["mesh"]["layers"] > 0 and cfd["mesh"]["jet_refinement"]["enabled"]
+    cfd.pop("flavour")
+    state = render_case(tmp_path / "paper", _tube(tmp_path), cfd, flavour="esi")
+    assert state["flow_rate"] == pytest.approx(1.2e-4) and state["jet_region"]["cells_across"] >= 10
+
+
 def test_bad_cfd_words_and_removed_fallback(tmp_path):
     stl = _tube(tmp_path)
     with pytest.raises(VCSInputError, match="'average'.*removed.*transient") as e:
