@@ -640,16 +640,19 @@ def fit_spline(
     Raises
     ------
     VCSInputError
-        When fewer than 4 distinct points remain or the ends coincide.
+        When the ends coincide (a path of fewer than 8 points is resampled linearly to 8).
     """
     pts = np.asarray(points, float)
     seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     keep = np.concatenate([[True], seg > 1e-12])
     pts = pts[keep]
     u = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-    if u[-1] <= 0 or len(pts) < 4:
+    if u[-1] <= 0:
         raise VCSInputError("the inlet and outlet are at the same place; give two distinct ends")
     u /= u[-1]
+    if len(pts) < 8:  # a section a few voxels long: the polyline itself, sampled densely enough
+        u_new = np.linspace(0.0, 1.0, 8)
+        pts, u = np.column_stack([np.interp(u_new, u, pts[:, k]) for k in range(3)]), u_new
     d0, d1 = end_directions if end_directions is not None else (None, None)
     return _lsq_fixed_ends(u, pts, uniform_knots(n_knots), pts[0], pts[-1], d0=d0, d1=d1)
 

@@ -144,7 +144,11 @@ class VesselCoordinateSystem:
         t_fit = time.perf_counter()
         shifts: list[float] = []
         data = pts
-        if recentre_iterations > 0:
+        short = path_len < 2.0 * radius
+        if short:  # no longer than its diameter: no room for a bend, and too few voxels to follow
+            data = inlet.center + np.linspace(0.0, 1.0, 17)[:, None] * (outlet.center - inlet.center)
+            working = fit_centerline(data, L_work, end_directions=dirs)
+        elif recentre_iterations > 0:
             working, shifts, data = section_centres(
                 working, vertices, wall_faces, iterations=recentre_iterations, end_directions=dirs
             )
@@ -175,6 +179,7 @@ class VesselCoordinateSystem:
             _centerline_checks(curve, working, lumen, vertices[wall_faces]),
             L_source="auto" if auto else "given",
             L_working=int(L_work),
+            short_section=bool(short),
         )
         if choice is not None:
             self.report["L_auto"] = {
@@ -184,7 +189,7 @@ class VesselCoordinateSystem:
                 "tried": choice.trials,
             }
         if not self.report["centerline_inside_lumen"]:
-            log.warning(
+            log.info(  # in fit_report.json: warnings and quality_reasons (vcs.vessel.fit_vessel)
                 "centerline leaves the voxelised lumen (min distance %.3f mm)",
                 self.report["centerline_min_wall_distance_mm"],
             )

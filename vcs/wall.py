@@ -315,6 +315,53 @@ class WallFit:
 REASONS = {0: "used", 1: "beyond_end_planes", 2: "outside_omega", 3: "not_first_crossing", 4: "branch"}
 
 
+def _too_few_points_message(
+    vcs: VesselCoordinateSystem, rho: NDArray[np.floating], tri: NDArray[np.floating], n: int, K: int, R: int
+) -> str:
+    """The one-line error when fewer wall vertices than wall coefficients lie inside the section.
+
+    Two causes, told apart by the knot span along tau, length / (K + 1): a section shorter than
+    (K + 1) / 2 lumen radii is too short for K (the README's rule is K + 1 ~ length / radius; a
+    smaller K is the fix, a finer mesh would only fit noise); otherwise the mesh is coarse for
+    the knot spans (remesh finer, or lower K/R).
+
+    Parameters
+    ----------
+    vcs : VesselCoordinateSystem
+        The section's coordinate system (mm).
+    rho : (n,) float, mm
+        Radii of the usable wall vertices.
+    tri : (M, 3, 3) float, mm
+        Wall triangles.
+    n : int
+        Number of usable wall vertices.
+    K, R : int
+        Interior knots in tau and theta.
+
+    Returns
+    -------
+    str
+    """
+    n_min = (K + 4) * (R + 1)
+    length = float(vcs.length)
+    radius = float(np.median(rho)) if len(rho) else float("nan")
+    edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).mean()) if len(tri) else float("nan")
+    head = f"only {n} wall vertices lie inside the section, fewer than the {n_min} wall coefficients (K={K}, R={R})"
+    k_max = n // (R + 1) - 4  # the largest K these vertices can determine with this R
+    if np.isfinite(radius) and length < 0.5 * (K + 1) * radius:
+        k_rule = max(1, int(round(length / radius)) - 1)
+        fix = f"give --K {max(1, min(k_rule, k_max))}" if k_max >= 1 else "give a smaller --K and --R"
+        return (
+            f"{head}: the section is only {length:.3g} mm long ({length / radius:.2g} lumen radii of "
+            f"{radius:.3g} mm), too short for K={K} (knots {length / (K + 1):.2g} mm apart, mesh edges "
+            f"{edge:.2g} mm); {fix} (K + 1 ~ length / radius)"
+        )
+    return (
+        f"{head}: the mesh is too coarse (edges {edge:.2g} mm for wall knots {length / (K + 1):.2g} mm apart "
+        f"along a {length:.3g} mm section); remesh it finer or lower --K/--R"
+    )
+
+
 def fit_wall(
     vcs: VesselCoordinateSystem,
     vertices: NDArray[np.floating],
@@ -412,10 +459,7 @@ def fit_wall(
 
     n_min = (K + 4) * (R + 1)
     if (reason == 0).sum() < n_min:
-        raise VCSInputError(
-            f"only {(reason == 0).sum()} wall vertices lie inside the section, fewer than the {n_min} wall "
-            f"coefficients (K={K}, R={R}); the mesh is too coarse: remesh it finer or lower --K/--R"
-        )
+        raise VCSInputError(_too_few_points_message(vcs, rho[reason == 0], tri, int((reason == 0).sum()), K, R))
     adj = vertex_adjacency(faces, len(vertices))
     # branch regions are grown by ~ grow_rel x the vessel radius (the ostium's flare), in rings
     edge_len = np.linalg.norm(tri[:, 0] - tri[:, 1], axis=1).mean()

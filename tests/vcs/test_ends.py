@@ -315,9 +315,9 @@ def test_closed_aortas_with_two_ends_fit_with_no_end_given(shared_data, tmp_path
 )
 def test_shared_meshes_candidate_kinds(shared_data, name, kinds):
     from vcs.io import read_surface
-    from vcs.vessel import largest_component
+    from vcs.vessel import vessel_component
 
-    s = largest_component(read_surface(shared_data / name))
+    s = vessel_component(read_surface(shared_data / name))
     assert [c.kind for c in list_ends(s.vertices, s.faces, s.cell_data).candidates] == kinds
 
 
