@@ -57,9 +57,10 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     """Reason to exclude a patient from its case ``status.json`` (None: include).
 
     Excluded when the file is missing, ``failed`` is true, ``status``/``state`` names a failure,
-    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``). With
-    ``accept_relaxed``, a case whose SIMPLE run did not converge but whose time-averaged fallback
-    met the relaxed criterion (``converged_relaxed`` true) is included. The reason quotes the
+    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``; a stationary
+    time average of its transient fallback is ``converged`` true). With ``accept_relaxed``, a
+    legacy status of the removed SIMPLE-iterate averaging with ``converged_relaxed`` true is
+    included (new runs never write it). The reason quotes the
     status's own ``reason``/``error``/``message``; a failure recorded before the solver (a status
     whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those) is its reason
     as is.
@@ -69,7 +70,7 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     status : mapping or None
         The parsed status.json; None when the file is missing.
     accept_relaxed : bool
-        Include cases that met only the relaxed (time-averaged) convergence criterion.
+        Include legacy statuses that met only the relaxed criterion (``converged_relaxed``).
 
     Returns
     -------
@@ -267,7 +268,7 @@ def compute_atlas(
     shape_block : {"all", "wall", "centerline"}
         Which part of the feature vector the shape PCA varies (:func:`vcs.atlas.pca.shape_matrix`).
     accept_relaxed : bool
-        Include time-averaged cases that met the relaxed criterion (:func:`status_exclusion`).
+        Include legacy statuses that met only the relaxed criterion (:func:`status_exclusion`).
 
     Returns
     -------

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vcs.cfd.foamfiles import patch_geometry
-from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, deep_merge, detect_openfoam, template_dir
+from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, check_cfd, deep_merge, detect_openfoam, template_dir
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 from vcs.mesh import points_inside, read_stl_solids, triangle_cross
 
@@ -76,13 +76,9 @@ def _inside_point(solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floa
     inlets = [k for k in solids if patch_role(k) == "inlet"]
     seeds = []
     if inlets:
-        t = solids[inlets[0]]
-        s = 0.5 * triangle_cross(t)
-        a = np.linalg.norm(s, axis=1)
-        c = (t.mean(axis=1) * a[:, None]).sum(0) / a.sum()
-        n = s.sum(0) / max(np.linalg.norm(s.sum(0)), 1e-300)
+        c, n = _inlet_disc(solids)
         for k in (4, 8, 16, 2, 32):
-            seeds += [c - k * h * n, c + k * h * n]
+            seeds += [c + k * h * n, c - k * h * n]  # inward first
     seeds.append(alltris.reshape(-1, 3).mean(0))
     frac = np.array([0.371, 0.413, 0.437])
     for p in seeds:
@@ -90,6 +86,61 @@ def _inside_point(solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floa
         if points_inside(q[None], alltris)[0]:
             return [float(x) for x in q]
     raise VCSInputError("could not find a point inside the vessel surface; set mesh.inside_point")
+
+
+def _inlet_disc(solids: dict[str, NDArray[np.floating]]) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """Area centroid (m) and unit inward normal of the STL's inlet solid."""
+    t = solids[next(k for k in solids if patch_role(k) == "inlet")]
+    s = 0.5 * triangle_cross(t)
+    a = np.linalg.norm(s, axis=1)
+    c = (t.mean(axis=1) * a[:, None]).sum(0) / a.sum()
+    n = -s.sum(0) / max(float(np.linalg.norm(s.sum(0))), 1e-300)  # STL normals point out of the lumen
+    return c, n
+
+
+def jet_region(solids: dict[str, NDArray[np.floating]], cfd: dict[str, Any]) -> dict[str, Any] | None:
+    """The refinement cylinder along the jet (snappyHexMesh ``refinementRegions``, mode inside).
+
+    The cylinder starts half a background cell behind the jet centre (``inlet.centre`` or the
+    inlet's area centroid) and runs along the inlet's inward normal for ``length`` jet diameters,
+    with a radius of ``radius`` jet radii; its level is the smallest giving at least
+    ``cells_across`` cells across the jet diameter d = 2 sqrt(valve_area / pi).
+
+    Parameters
+    ----------
+    solids : dict of str -> (T, 3, 3) float
+        The STL's triangles by solid (m).
+    cfd : dict
+        Merged CFD parameters (``mesh.cell_size`` m, ``mesh.jet_refinement``, ``inlet``).
+
+    Returns
+    -------
+    dict or None
+        None unless ``inlet.type`` is jet and the refinement is enabled; else ``point1``,
+        ``point2`` (m), ``radius`` (m), ``level``, ``cell_size`` (m, inside the cylinder),
+        ``jet_diameter`` (m), ``cells_across`` (jet diameter / cell size), ``length_diameters``.
+    """
+    jr = cfd["mesh"]["jet_refinement"]
+    if cfd["inlet"]["type"] != "jet" or not jr["enabled"]:
+        return None
+    h = float(cfd["mesh"]["cell_size"])
+    d = 2.0 * np.sqrt(float(cfd["inlet"]["valve_area"]) / np.pi)
+    level = max(int(np.ceil(np.log2(max(jr["cells_across"] * h / d, 1.0)) - 1e-9)), 0)
+    c, n = _inlet_disc(solids)
+    if cfd["inlet"].get("centre"):
+        c = np.asarray(cfd["inlet"]["centre"], float)
+    p1 = c - 0.5 * h * n
+    p2 = c + float(jr["length"]) * d * n
+    return {
+        "point1": [float(x) for x in p1],
+        "point2": [float(x) for x in p2],
+        "radius": float(jr["radius"] * d / 2.0),
+        "level": int(level),
+        "cell_size": h / 2**level,
+        "jet_diameter": float(d),
+        "cells_across": float(d / (h / 2**level)),
+        "length_diameters": float(jr["length"]),
+    }
 
 
 def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
@@ -113,9 +164,14 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "solids": state["solids"],
         "patches": state["patches"],
         "end_time": cfd["solver"]["max_iterations"],
+        "delta_t": 1,
         "div_scheme": cfd["solver"]["div_scheme"],
         "residual_control": True,
+        "transient": False,
         "average": False,
+        "write_interval": None,
+        "max_delta_t": None,
+        "jet_region": state.get("jet_region"),
         "inlet_values": None,
     }
     ctx.update(extra)
@@ -194,8 +250,7 @@ def render_case(
             "install one of those or set cfd.flavour"
         )
     cfd["flavour"] = flavour
-    if cfd["inlet"]["type"] not in ("jet", "uniform", "parabolic"):
-        raise VCSInputError(f"inlet.type must be jet, uniform or parabolic, not {cfd['inlet']['type']!r}")
+    check_cfd(cfd)
     fl = FLAVOURS[flavour]
 
     solids = read_stl_solids(stl_path)
@@ -243,6 +298,7 @@ def render_case(
         "patches": [{"name": k, "role": roles[k]} for k in solids] + [{"name": "background", "role": "other"}],
         "flow_rate": _flow_rate(cfd["inlet"]),
         "stl_bounds": [[float(x) for x in lo], [float(x) for x in hi]],
+        "jet_region": jet_region(solids, cfd),
     }
     case_dir.mkdir(parents=True, exist_ok=True)
     geo = case_dir / fl["geometry_dir"]

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from vcs.cfd.foamfiles import family_of_version, parse_banner
+from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 
 # --------------------------------------------------------------------------- parameters
 
@@ -41,11 +42,18 @@ DEFAULTS: dict[str, Any] = {
         "n_cells_between_levels": 2,
         "resolve_feature_angle": 30,
         "snap_solve_iterations": 50,
-        "layers": 0,  # wall prism layers (0 = addLayers off)
-        "layer_expansion": 1.2,
-        "final_layer_thickness": 0.3,
-        "min_layer_thickness": 0.1,
+        "layers": 3,  # wall prism layers (snappy addLayers; 0 = off)
+        "layer_expansion": 1.2,  # thickness ratio of consecutive layers
+        "final_layer_thickness": 0.3,  # last layer / local cell size
+        "min_layer_thickness": 0.1,  # thinner layers are not added (/ local cell size)
+        "jet_refinement": {  # refinement cylinder along the jet (inlet.type jet only)
+            "enabled": True,
+            "cells_across": 10,  # at least this many cells across the jet diameter (sets the level)
+            "length": 5.0,  # cylinder length from the inlet along its inward normal [jet diameters]
+            "radius": 2.0,  # cylinder radius [jet radii]
+        },
         "max_non_ortho": 65,
+        "max_boundary_skewness": 4,  # snappy's limit on boundary faces (= checkMesh's, which fails above)
         "max_local_cells": 2_000_000,
         "max_global_cells": 20_000_000,
         "inside_point": None,  # [x, y, z] inside the lumen; None = automatic (from the inlet)
@@ -75,10 +83,16 @@ DEFAULTS: dict[str, Any] = {
         "p_rel_tol": 0.05,
         "U_solver_tolerance": 1.0e-9,
         "U_rel_tol": 0.1,
-        "fallback": "average",  # none | average: if not converged, continue average_iterations
-        # with fieldAverage and report the time-averaged (pseudo-steady) fields
-        "average_iterations": 500,
-        "relaxed_tolerance": 1.0e-3,  # reported criterion for the fallback (converged stays false)
+        "fallback": "transient",  # none | transient: if SIMPLE does not converge, run pimpleFoam
+        # from the SIMPLE state and report time averages (converged only when stationary)
+        "transient": {
+            "flow_throughs": 5.0,  # averaging window [flow-through times V_lumen / Q]
+            "washout_flow_throughs": 1.0,  # start-up wash-out before averaging [flow-through times]
+            "max_co": 1.0,  # Courant number limit of the adjustable time step
+            "stationarity_tolerance": 0.05,  # max relative difference of the two half-window means
+            # of the inlet-outlet pressure difference and of the area-mean time-averaged |WSS|
+            "stationarity_tolerance_U": 0.10,  # ... of U (volume-weighted L2, relative)
+        },
         "timeout_s": None,  # wall-clock limit per utility call [s]
     },
     "decomposition": {
@@ -88,6 +102,12 @@ DEFAULTS: dict[str, Any] = {
         "write_format": "ascii",  # ascii is required by the inlet-profile reader
     },
 }
+
+# the words a config may put into an OpenFOAM dictionary (everything else there is a number)
+INLET_TYPES = ("jet", "uniform", "parabolic")
+DIV_SCHEMES = ("upwind", "linearUpwind", "LUST", "limitedLinearV")  # div(phi,U), see fvSchemes
+FALLBACKS = ("none", "transient")
+DECOMPOSITION_METHODS = ("hierarchical", "simple")
 
 # ONE table for both flavours: names that differ, the geometry folder and the case files.
 _COMMON_FILES = [
@@ -145,6 +165,67 @@ def deep_merge(base: dict[str, Any], over: dict[str, Any] | None) -> dict[str, A
         else:
             out[k] = copy.deepcopy(v)
     return out
+
+
+def _number(cfd: dict[str, Any], dotted: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise VCSInputError unless ``cfd[dotted]`` is a number in [lo, hi] (or (lo, hi])."""
+    node: Any = cfd
+    for k in dotted.split("."):
+        node = node.get(k) if isinstance(node, dict) else None
+    ok = isinstance(node, (int, float)) and not isinstance(node, bool) and (node > lo if lo_open else node >= lo)
+    if not ok or node > hi:
+        bound = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+        raise VCSInputError(f"cfd.{dotted} must be a number in {bound}, not {node!r}")
+
+
+def _word(cfd: dict[str, Any], dotted: str, allowed: tuple[str, ...]) -> None:
+    """Raise VCSInputError unless ``cfd[dotted]`` is one of ``allowed``."""
+    node: Any = cfd
+    for k in dotted.split("."):
+        node = node.get(k) if isinstance(node, dict) else None
+    if node not in allowed:
+        raise VCSInputError(f"cfd.{dotted} must be one of {', '.join(allowed)}, not {node!r}")
+
+
+def check_cfd(cfd: dict[str, Any]) -> None:
+    """Check the CFD parameters that reach OpenFOAM dictionaries (words from fixed lists, numbers
+    in range); a user-fixable error is a one-line VCSInputError.
+
+    Parameters
+    ----------
+    cfd : dict
+        Parameters merged over :data:`DEFAULTS`.
+
+    Raises
+    ------
+    VCSInputError
+        For a word outside its list (inlet type, div schemes, fallback, decomposition method,
+        write format), the removed ``fallback: average``, or a transient or jet-refinement
+        number out of range.
+    """
+    if cfd["solver"].get("fallback") == "average":
+        raise VCSInputError(
+            "cfd.solver.fallback 'average' (averaging SIMPLE iterates) was removed: it is not a time average; "
+            "use 'transient' (pimpleFoam, time-averaged fields) or 'none'"
+        )
+    _word(cfd, "inlet.type", INLET_TYPES)
+    _word(cfd, "solver.fallback", FALLBACKS)
+    _word(cfd, "solver.startup_scheme", DIV_SCHEMES)
+    _word(cfd, "solver.div_scheme", DIV_SCHEMES)
+    _word(cfd, "decomposition.method", DECOMPOSITION_METHODS)
+    _word(cfd, "io.write_format", ("ascii",))
+    _number(cfd, "solver.transient.flow_throughs", 0.0, 1e3, lo_open=True)
+    _number(cfd, "solver.transient.washout_flow_throughs", 0.0, 1e3)
+    _number(cfd, "solver.transient.max_co", 0.0, 2.0, lo_open=True)
+    _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)
+    _number(cfd, "mesh.layers", 0, 20)
+    _number(cfd, "mesh.max_boundary_skewness", 0.0, 100.0, lo_open=True)
+    _number(cfd, "mesh.jet_refinement.cells_across", 1, 100)
+    _number(cfd, "mesh.jet_refinement.length", 0.0, 100.0, lo_open=True)
+    _number(cfd, "mesh.jet_refinement.radius", 1.0, 20.0)
+    if not isinstance(cfd["mesh"]["jet_refinement"].get("enabled"), bool):
+        raise VCSInputError("cfd.mesh.jet_refinement.enabled must be true or false")
 
 
 def template_dir() -> Path:
