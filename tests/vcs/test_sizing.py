@@ -97,6 +97,8 @@ def test_numeric_and_patient_cell_sizes_are_used_as_given():
     assert c["cell_size_m"] == 2e-3 and c["source"] == "config" and c["cells_across_end"] == pytest.approx(9.0)
     p = choose_cell_size(mesh_cfg(cell_size=2e-3), sizes, 1e-5, override=1.2e-3)
     assert p["cell_size_m"] == 1.2e-3 and p["source"] == "patient" and "cell_size_mm" in p["why"]
+    a = choose_cell_size(mesh_cfg(cell_size=2e-3), sizes, 1e-5, override="auto")  # the patient asks for auto
+    assert a["cell_size_m"] == pytest.approx(0.978e-3) and a["source"] == "auto" and "cell_size_mm" in a["why"]
     with pytest.raises(VCSInputError, match="positive number"):
         choose_cell_size(mesh_cfg(), sizes, 1e-5, override=-1.0)
 

@@ -235,18 +235,16 @@ def render_files(case_dir: Path, state: dict[str, Any], files: list[str], **extr
         out.write_text(env.get_template(rel).render(**ctx))
 
 
-def _patient_values(patient: dict[str, Any] | None) -> dict[str, float]:
+def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
     """The per-patient values of :func:`render_case`, checked (one-line VCSInputError)."""
-    out: dict[str, float] = {}
+    out: dict[str, Any] = {}
     for k, v in (patient or {}).items():
         if k not in PATIENT_KEYS:
             raise VCSInputError(f"unknown per-patient CFD value {k!r}; known: {', '.join(PATIENT_KEYS)}")
         if v is None:
             continue
         if k == "cell_size":
-            if v == "auto":
-                continue
-            out[k] = float(cell_size_value(v, "the patient's cell size"))
+            out[k] = cell_size_value(v, "the patient's cell size")
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
             raise VCSInputError(f"the patient's {k} must be a positive number (SI units), not {v!r}")

@@ -196,8 +196,9 @@ def choose_cell_size(
         :func:`vessel_sizes` or :func:`stl_sizes`.
     volume : float, m^3
         Lumen volume (the closed wall STL, flow extensions included).
-    override : float or None, m
-        The patient's own cell size (patients sheet), or None.
+    override : float, "auto" or None
+        The patient's own cell size (m, or ``"auto"``: the auto rule whatever ``cell_size`` says;
+        patients sheet), or None.
 
     Returns
     -------
@@ -214,11 +215,11 @@ def choose_cell_size(
     max_cells = int(mesh["max_cells"])
     requested = {"cells_across_end": n_end, "cells_across_narrowest": n_narrow, "max_cells": max_cells}
     mm = 1e3
-    if override is not None:
-        h = float(cell_size_value(override, "the patient's cell size"))
+    if override is not None and cell_size_value(override, "the patient's cell size") != CELL_SIZE_AUTO:
+        h = float(override)
         source, governed = "patient", "patient"
         why = f"the patient's own cell size {h * mm:.4g} mm (patients sheet cell_size_mm)"
-    elif mesh["cell_size"] != CELL_SIZE_AUTO:
+    elif override is None and mesh["cell_size"] != CELL_SIZE_AUTO:
         h = float(cell_size_value(mesh["cell_size"], "cfd.mesh.cell_size"))
         source, governed = "config", "config"
         why = f"cfd.mesh.cell_size {h * mm:.4g} mm"
@@ -239,7 +240,8 @@ def choose_cell_size(
                 f"raised from {h * mm:.3g} mm to {h_cap * mm:.3g} mm"
             )
             h, governed = h_cap, "max_cells"
-        why = f"auto: {why}"
+        mine = " (the patient's cell_size_mm)" if override is not None else ""
+        why = f"auto{mine}: {why}"
     return {
         "cell_size_m": h,
         "source": source,
