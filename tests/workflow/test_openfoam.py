@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from model_phantoms import narrowed_model  # tests/ (on sys.path by conftest): vessels with exact sections
 
 from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case
 from vcs.cfd.case import jet_region, render_files
@@ -23,6 +24,7 @@ from vcs.cfd.openfoam import deep_merge
 from vcs.cfd.run import STAGE_FILES, transient_plan
 from vcs.errors import VCSInputError
 from vcs.phantoms.analytic import write_closed_tube_stl
+from vcs.surface import wall_mesh, write_multisolid_stl
 
 R = 0.01  # tube radius [m]
 L = 0.12  # tube length [m]
@@ -239,10 +241,6 @@ def test_jet_inlet_flux(tmp_path):
 
 
 # ------------------------------------------------- mesh sized to the vessel, lost patches
-
-# (conftest puts tests/ on sys.path) straight vessels whose sections are known exactly
-from model_phantoms import narrowed_model  # noqa: E402
-from vcs.surface import wall_mesh, write_multisolid_stl  # noqa: E402
 
 QUICK_SOLVE = {"max_iterations": 2, "startup_iterations": 0, "fallback": "none"}
 
