@@ -223,7 +223,8 @@ def aorta_cohort():
         m, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", f"aorta{seed}"))
         models.append(m)
         diameters.append(ph.params["ascending_diameter_mm"])
-    aligned, _, _ = align_models(models)
+    L = max(m.n_knots for m in models)  # --L auto per vessel: one L for the cohort (as compute_atlas)
+    aligned, _, _ = align_models([m.with_n_knots(L) for m in models])
     return aligned, np.array(diameters)
 
 
@@ -231,8 +232,9 @@ def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
     """The generator's dominant parameter is recovered by the first shape mode.
 
     Measured (seeds 0-7, resolution 3, no aneurysm): |r| = 0.98 for the wall block's first mode,
-    0.93 for the paper's joint (centerline + wall) PCA (the generator's lengths follow the
-    diameter allometrically; with random aneurysms the joint |r| drops to 0.88).
+    0.88 for the paper's joint (centerline + wall) PCA with the cohort's L (the largest --L auto of
+    the 8; 0.93 with the paper's L = 9: more centerline control points carry more of the arch's
+    variation, which the generator draws independently of the diameter).
     """
     aligned, d = aorta_cohort
     wall = PCA.from_data(shape_matrix(aligned, "wall"), 3)
@@ -240,7 +242,7 @@ def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
     r_wall = abs(np.corrcoef(wall.scores[:, 0], d)[0, 1])
     r_joint = abs(np.corrcoef(joint.scores[:, 0], d)[0, 1])
     assert r_wall >= 0.9, r_wall
-    assert r_joint >= 0.9, r_joint
+    assert r_joint >= 0.85, r_joint
     # projection of a cohort member: its own scores, reconstruction error ~ 0 with all modes
     full = PCA.from_data(shape_matrix(aligned, "all"))
     s, _, err = full.project(aligned[3].feature_vector())

@@ -21,7 +21,7 @@ the plotting module only when it writes figures.
 """
 
 from vcs.atlas.build import build_atlas
-from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas, project_model, status_exclusion
+from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas, fit_exclusion, project_model, status_exclusion
 from vcs.atlas.pca import (
     FLOW_FIELDS,
     PCA,
@@ -67,6 +67,7 @@ __all__ = [
     "ridge_loo",
     "shape_matrix",
     "status_exclusion",
+    "fit_exclusion",
     "top_variation_mask",
     "transform_model",
     "wall_grid",

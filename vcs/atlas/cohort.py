@@ -28,6 +28,26 @@ if TYPE_CHECKING:
     from vcs.vessel import VesselModel
 
 
+def fit_exclusion(model: VesselModel) -> str | None:
+    """Reason to exclude a patient for the quality of its VCS fit (None: include).
+
+    ``vcs fit`` writes ``quality`` (``ok`` or ``poor``) and ``quality_reasons`` into the model's
+    ``meta`` (model.json), see :func:`vcs.vessel.fit_quality`.
+
+    Parameters
+    ----------
+    model : VesselModel
+
+    Returns
+    -------
+    str or None
+        One line: ``fit quality poor: <reasons>``.
+    """
+    if model.meta.get("quality") == "poor":
+        return "fit quality poor: " + "; ".join(model.meta.get("quality_reasons") or ["no reason recorded"])
+    return None
+
+
 def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool = False) -> str | None:
     """Reason to exclude a patient from its case ``status.json`` (None: include).
 
@@ -164,7 +184,9 @@ def compute_atlas(
     """
     excluded = {}
     for pid in models:
-        reason = status_exclusion(statuses[pid], accept_relaxed=accept_relaxed) if pid in statuses else None
+        reason = fit_exclusion(models[pid])
+        if reason is None and pid in statuses:
+            reason = status_exclusion(statuses[pid], accept_relaxed=accept_relaxed)
         if reason is None and pid not in fields:
             reason = "no resampled fields"
         if reason is not None:
@@ -185,9 +207,20 @@ def compute_atlas(
                     f"patient {patients[0]} "
                     f"{shapes0[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
                 )
+    # one L for the cohort: the largest any included patient was fitted with (each fitted with
+    # --L auto picks what its vessel needs); the others are refitted to it (VesselModel.with_n_knots)
+    knots = {p: models[p].n_knots for p in patients}
+    L = max(knots.values())
     aligned, transforms, report = align_models(
-        [models[p] for p in patients], n_tau=n_tau_align, n_theta=n_theta_align, scale=scale
+        [models[p].with_n_knots(L) for p in patients], n_tau=n_tau_align, n_theta=n_theta_align, scale=scale
     )
+    report["knots"] = {
+        "L": L,
+        "K": None if aligned[0].wall is None else aligned[0].wall.K,
+        "R": None if aligned[0].wall is None else aligned[0].wall.R,
+        "L_rule": "the largest L of the included patients; smaller ones refitted to it",
+        "L_fitted": knots,
+    }
     gpa_mean = report.pop("mean_points_mm")
     shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
     flow = {
@@ -251,6 +284,7 @@ def project_model(atlas: Atlas, model: VesselModel, *, n_modes: int | None = Non
         ``model`` is incompatible with the atlas (:func:`vcs.atlas.procrustes.check_compatible`).
     """
     template = atlas.aligned_models[0]
+    model = model.with_n_knots(template.n_knots)
     check_compatible([template, model])
     n_tau, n_theta = atlas.options["n_tau_align"], atlas.options["n_theta_align"]
     T = procrustes(wall_grid_points(model, n_tau, n_theta), atlas.alignment_mean, scale=atlas.options["scale"])
@@ -287,6 +321,7 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         "patients_included": list(atlas.patients),
         "patients_excluded": [{"id": p, "reason": r} for p, r in atlas.excluded.items()],
         "options": atlas.options,
+        "knots": atlas.alignment_report.get("knots"),
         "alignment": {
             **atlas.alignment_report,
             "transforms": {p: t.to_dict() for p, t in zip(atlas.patients, atlas.transforms)},

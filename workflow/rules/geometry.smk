@@ -21,7 +21,8 @@ rule vcs_phantom:
 rule vcs_fit:
     conda:
         "../envs/vcs.yaml"
-    # Centerline B-spline + RMF frame + wall model rho_w of one patient. Bad input (unreadable
+    # Centerline B-spline + RMF frame + wall model rho_w of one patient (L: auto = the knots this
+    # vessel needs; the atlas refits every centerline to the cohort's largest L). Bad input (unreadable
     # mesh, ends not found) fails the job with one line in the log (exit code 2).
     input:
         unpack(fit_input),

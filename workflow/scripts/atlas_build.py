@@ -38,6 +38,14 @@ def main(smk):
         shutil.copy2(png, figure_dir / png.name)
     for pid, reason in atlas.excluded.items():
         log.warning("excluded %s: %s", pid, reason)
+    knots = atlas.alignment_report.get("knots") or {}
+    log.info(
+        "cohort knots L=%s K=%s R=%s (fitted L: %s)",
+        knots.get("L"),
+        knots.get("K"),
+        knots.get("R"),
+        knots.get("L_fitted"),
+    )
     log.info("atlas of %d patients (%d excluded) -> %s", len(atlas.patients), len(atlas.excluded), smk.output.json)
 
 
