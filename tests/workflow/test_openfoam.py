@@ -54,6 +54,34 @@ def test_defaults_documented_keys():
     assert DEFAULTS["solver"]["tolerance"] == pytest.approx(1e-5)
 
 
+def test_config_schema_covers_every_cfd_default():
+    """Each key of vcs.cfd.DEFAULTS can be set in config.yaml (the schema forbids unknown keys) and
+    config/config.yaml validates, auto cell size and inflow scaling included."""
+    import jsonschema
+    import yaml
+
+    repo = Path(__file__).resolve().parents[2]
+    schema = yaml.safe_load((repo / "workflow/schemas/config.schema.yaml").read_text())
+
+    def missing(defaults: dict, node: dict, where: str) -> list[str]:
+        out = []
+        for k, v in defaults.items():
+            sub = node.get("properties", {}).get(k)
+            if sub is None:
+                out.append(f"{where}.{k}")
+            elif isinstance(v, dict):
+                out += missing(v, sub, f"{where}.{k}")
+        return out
+
+    assert missing(DEFAULTS, schema["properties"]["cfd"], "cfd") == []
+    config = yaml.safe_load((repo / "config/config.yaml").read_text())
+    jsonschema.validate(config, schema)
+    assert config["cfd"]["mesh"]["cell_size"] == "auto" and config["cfd"]["inlet"]["scaling"] == "scaled_by_inlet_area"
+    bad = deep_merge(config, {"cfd": {"mesh": {"cell_size": "fine"}}})
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(bad, schema)
+
+
 def test_render_org10_is_v10_native_and_parses(tmp_path):
     from PyFoam.RunDictionary.ParsedParameterFile import ParsedParameterFile
 

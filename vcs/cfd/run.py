@@ -278,7 +278,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     """Mesh and solve a rendered case; writes ``status.json``, ``residuals.csv/png``, ``logs/log.*``.
 
     Steps: blockMesh, snappyHexMesh -overwrite (jet refinement cylinder, wall prism layers),
-    checkMesh (failure stops), inlet profile, [decomposePar], simpleFoam start-up (first order)
+    checkMesh, the patch check (:func:`patch_check`: an STL solid lost or under-resolved in
+    meshing, or a leak into the background box, stops before the solver with the reason in
+    words; so does a failed checkMesh), inlet profile, [decomposePar], simpleFoam start-up (first order)
     then main stage (residualControl). If SIMPLE does not converge (or diverges: floating point
     exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
     written (after a divergence, the start-up's) (adjustable time step at Courant number <=
@@ -303,7 +305,10 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         The status (also ``status.json``): ``converged``, ``criterion``, ``criterion_used``
         (``residualControl``, ``time_average_stationary`` or ``none``), ``reason``,
         ``iterations`` (SIMPLE), ``final_residuals``, ``cells``, ``lumen_volume_m3``, ``mesh``
-        (prism-layer coverage, jet refinement), ``mass_imbalance`` (relative), ``flow_rates``
+        (``sizing``: the cell size and why, the background box, the levels; ``patches``: faces per
+        STL solid; ``background_faces``; prism-layer coverage, jet refinement), ``mesh_ok`` and
+        ``stage`` (``mesh`` when meshing stopped the patient), ``inflow`` (the flow rate applied
+        and why: :func:`vcs.cfd.sizing.choose_inflow`), ``mass_imbalance`` (relative), ``flow_rates``
         (m^3/s), ``patch_pressure`` (kinematic, m^2/s^2), ``inlet_minus_outlet_pressure``
         (m^2/s^2 and Pa; negative = pressure recovery), ``wall_shear_stress_Pa`` (and, for a
         time average, ``tawss_Pa`` and ``osi``), ``fields`` (which field files hold the
