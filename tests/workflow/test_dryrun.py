@@ -20,7 +20,7 @@ def chain(rules, ids=IDS):
     return {(r, i) for r in rules for i in ids}
 
 
-COHORT = {("atlas_build", None), ("all", None)}
+COHORT = {("atlas_build", None), ("atlas_complete", None), ("all", None)}
 
 
 def test_fresh_cohort_plans_every_stage_once_per_patient(cohort):
