@@ -285,7 +285,7 @@ def test_too_coarse_cell_size_loses_the_outlet_and_says_so(tmp_path):
     """A 2 mm cell against a 1 mm outlet radius: snappyHexMesh drops the outlet and checkMesh still
     says 'Mesh OK'. The patient stops after meshing with the reason in words, never reaches the
     solver, and the atlas excludes it with that reason."""
-    from vcs.atlas import status_exclusion
+    from vcs.atlas import status_exclusion, status_stage
     from vcs.cfd.foamfiles import read_boundary
 
     model = narrowed_model(6.0, 4.0, 1.0, length=30.0)  # inlet r 6 mm, outlet r 1 mm
@@ -310,7 +310,7 @@ def test_too_coarse_cell_size_loses_the_outlet_and_says_so(tmp_path):
     assert st["failed_log"].endswith("logs/log.snappyHexMesh")
     assert not any(k.startswith("simpleFoam") for k in st["timings_s"])  # the solver never ran
     assert st["mesh"]["sizing"]["cell_size"]["source"] == "config"
-    assert "outlet lost in meshing: 0 faces" in status_exclusion(st)
+    assert status_exclusion(st) == st["reason"] and status_stage(st) == "mesh"  # atlas.json: stage and reason
 
 
 @pytest.mark.openfoam
