@@ -5,7 +5,8 @@
 #   snakemake --report results/report.html             # after a run
 #
 # Per patient (results/patients/<id>/): vcs_fit -> vcs_wall -> openfoam_case -> openfoam_solve
-# -> fields_sample; then atlas_build over the cohort (results/atlas/) and results/provenance.json.
+# -> fields_sample; then atlas_build over the cohort (results/atlas/), atlas_complete (exit status:
+# non-zero with one line when a patient is not in the atlas) and results/provenance.json.
 
 from snakemake.utils import min_version
 
@@ -27,5 +28,6 @@ include: "workflow/rules/provenance.smk"
 rule all:
     input:
         "results/atlas/atlas.json",
+        "results/atlas/complete.txt",  # fails the run (after the atlas) when a patient is left out
         patient_files("results/patients/{id}/fields.npz"),
     default_target: True

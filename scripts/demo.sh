@@ -7,6 +7,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
 export WM_PROJECT_DIR=${WM_PROJECT_DIR:-/usr/share/openfoam}
+# one BLAS thread per process: reproducible sums, and no oversubscription next to OpenFOAM ranks
+export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 # config/config.yaml is the Snakefile's configfile; a --configfile in "$@" is merged over it
 smk=(.venv/bin/snakemake --profile profiles/local "$@")
 

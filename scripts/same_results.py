@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -41,15 +42,27 @@ VOLATILE_REPORT_KEYS = ("timings_s", "mesh")  # wall-clock times; the input path
 
 
 def _vcs(*args: str) -> None:
+    """`vcs ARGS` with THIS checkout's package first on the path (cwd and PYTHONPATH = the checkout:
+    an editable install elsewhere must not answer instead)."""
     cmd = [sys.executable, "-m", "vcs.cli", *args]
-    r = subprocess.run(cmd, capture_output=True, text=True)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, env=env)
     if r.returncode != 0:
         sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
 
 
 def run_fits(out: Path) -> None:
     """vcs fit of the fixed corpus into ``out``."""
+    out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
+    probe = subprocess.run(
+        [sys.executable, "-c", "import vcs; print(vcs.__file__)"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
+    print(f"code: {probe.stdout.strip()}")
     for kind, seed in PHANTOMS:
         name = f"{kind}_seed{seed}"
         stl = out / "phantoms" / f"{name}.stl"
@@ -90,15 +103,17 @@ def _same_npz(a: Path, b: Path) -> str | None:
 def compare(a: Path, b: Path) -> int:
     """Compare the result files of two trees; print one line per file; 0 when all match."""
     names = ("model.json", "fit_report.json", "wall.stl", "fields.npz")
-    files = sorted({p.relative_to(a) for p in a.rglob("*") if p.name in names or p.parent.name == "phantoms"})
+    files = sorted(
+        {p.relative_to(t) for t in (a, b) for p in t.rglob("*") if p.name in names or p.parent.name == "phantoms"}
+    )
     if not files:
         print(f"no result files under {a}")
         return 1
     bad = 0
     for rel in files:
         pa, pb = a / rel, b / rel
-        if not pb.exists():
-            why = "missing in B"
+        if not pa.exists() or not pb.exists():
+            why = "missing in " + ("A" if not pa.exists() else "B")
         elif rel.name == "fields.npz":
             why = _same_npz(pa, pb)
         elif rel.name == "fit_report.json":

@@ -5,6 +5,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
 export WM_PROJECT_DIR=${WM_PROJECT_DIR:-/usr/share/openfoam}
+# one BLAS thread per process: reproducible sums, and no oversubscription next to OpenFOAM ranks
+export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 code=(vcs tests bench scripts workflow/scripts setup.py)
 echo "[test] ruff check + ruff format --check"
 .venv/bin/ruff check --quiet "${code[@]}"

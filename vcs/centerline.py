@@ -25,12 +25,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage, sparse
 from scipy.interpolate import BSpline
 from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
 
 from vcs.coords import CurveIndex, to_vcs
 from vcs.ends import End, Ends
 from vcs.errors import VCSInputError
 from vcs.frame import ParallelTransportFrame, initial_v1
-from vcs.mesh import triangle_cross
+from vcs.mesh import triangle_cross, vertex_normals
 
 log = logging.getLogger(__name__)
 
@@ -558,7 +559,7 @@ def _lsq_fixed_ends(
     control points (weight ``smooth`` relative to the data term) keeps knot spans without data
     well-posed.
     """
-    B = BSpline.design_matrix(u, t, 3).toarray()
+    B = BSpline.design_matrix(u, t, 3)
     n = B.shape[1]
     C0 = np.zeros((n, 3))
     C0[0], C0[-1] = p0, p1
@@ -576,19 +577,22 @@ def _lsq_fixed_ends(
         g[n - 2] = -np.asarray(d1)
         cols.append(g)
         hi = n - 2
-    for j in range(lo, hi):
-        for k in range(3):
-            g = np.zeros((n, 3))
-            g[j, k] = 1.0
-            cols.append(g)
-    G = np.stack(cols, axis=-1)  # (n, 3, nz)
+    free = np.zeros((hi - lo, 3, n, 3))
+    free[np.arange(hi - lo)[:, None], np.arange(3)[None, :], np.arange(lo, hi)[:, None], np.arange(3)[None, :]] = 1.0
+    G = (
+        np.concatenate([np.stack(cols, axis=-1), free.reshape(-1, n, 3).transpose(1, 2, 0)], axis=-1)
+        if cols
+        else (free.reshape(-1, n, 3).transpose(1, 2, 0))
+    )  # (n, 3, nz)
+    # normal equations through the n x n Gram matrices (B^T B and the penalty's D^T D): the cost
+    # does not grow with the number of data points beyond one sparse product
     D = np.diff(np.eye(n), 2, axis=0)
-    A = np.einsum("in,nkz->ikz", B, G).reshape(-1, G.shape[-1])
-    r = (pts - B @ C0).reshape(-1)
-    P = np.einsum("in,nkz->ikz", D, G).reshape(-1, G.shape[-1])
-    q = -(D @ C0).reshape(-1)
     lam = smooth * len(u)
-    z = np.linalg.solve(A.T @ A + lam * P.T @ P, A.T @ r + lam * P.T @ q)
+    M = (B.T @ B).toarray() + lam * (D.T @ D)
+    rhs_c = np.asarray(B.T @ pts) - M @ C0  # (n, 3)
+    Gk = G.transpose(1, 0, 2)  # (3, n, nz)
+    H = np.einsum("knz,kny->zy", Gk, M @ Gk)
+    z = np.linalg.solve(H, np.einsum("knz,nk->z", Gk, rhs_c))
     return BSpline(t, C0 + G @ z, 3)
 
 
@@ -655,13 +659,17 @@ def reparametrise_by_arc_length(
     *,
     end_directions: tuple[ArrayLike, ArrayLike] | None = None,
     n_resample: int = 2000,
-    passes: int = 2,
+    passes: int = 3,
+    tolerance: float = 0.002,
 ) -> BSpline:
     """The same curve with tau in [0, 1] proportional to arc length (paper Section 2.2.1).
 
     The curve is refitted (same knots, same end points, same end directions) to ``n_resample`` + 1
-    of its own points equally spaced in arc length, at tau = 0, 1/n_resample, ..., 1; two passes
-    make the speed |c'(tau)| constant to < 0.1 % on the vessels here.
+    of its own points equally spaced in arc length, at tau = 0, 1/n_resample, ..., 1, up to
+    ``passes`` times, stopping early once :func:`speed_deviation` is below ``tolerance``. How
+    constant |c'(tau)| can be is bounded by how well L uniform knots represent the curve at
+    uniform speed (a tight bend needs knots); :func:`choose_n_knots` picks L so that it is
+    within 2 %.
 
     Parameters
     ----------
@@ -672,7 +680,9 @@ def reparametrise_by_arc_length(
     n_resample : int
         Arc-length samples per pass.
     passes : int
-        Refits.
+        Most refits.
+    tolerance : float
+        Stop when max| |c'| / mean |c'| - 1 | is below this (dimensionless).
 
     Returns
     -------
@@ -688,7 +698,32 @@ def reparametrise_by_arc_length(
         tau = np.linspace(0, 1, n_resample + 1)
         u_of_tau = np.interp(tau * s[-1], s, dense)
         curve = _lsq_fixed_ends(tau, curve(u_of_tau), t, p0, p1, smooth=1e-9, d0=d0, d1=d1)
+        if speed_deviation(curve) < tolerance:
+            break
     return curve
+
+
+def speed_deviation(curve: BSpline, n: int = 2001) -> float:
+    """How far tau is from normalised arc length: max over tau of | |c'(tau)| / mean |c'| - 1 |.
+
+    Paper Section 2.2.1 defines tau as the normalised arc length, i.e. |c'(tau)| = length for
+    every tau; this is the relative deviation from it (0 for an exact arc-length parameter),
+    reported as ``arc_length_speed_deviation``.
+
+    Parameters
+    ----------
+    curve : BSpline
+        c(tau) on [0, 1], mm.
+    n : int
+        Equally spaced samples of tau.
+
+    Returns
+    -------
+    float
+        Dimensionless.
+    """
+    speed = np.linalg.norm(curve.derivative()(np.linspace(0.0, 1.0, n)), axis=1)
+    return float(np.max(np.abs(speed / speed.mean() - 1.0)))
 
 
 def fit_centerline(
@@ -750,6 +785,166 @@ def curve_length(curve: BSpline) -> float:
     return float(arc_length_table(curve, np.linspace(0, 1, 2049))[-1])
 
 
+# ------------------------------------------------------------------ 4b. the number of knots L
+
+
+#: Candidate numbers of centerline knots of ``--L auto``, smallest first (about 10 % apart).
+L_LADDER = (9, 10, 11, 12, 13, 14, 16, 18, 20, 22, 25, 28, 32, 36, 40, 45, 50, 56, 63, 70)
+
+
+@dataclass(frozen=True)
+class KnotChoice:
+    """Result of :func:`choose_n_knots`.
+
+    Attributes
+    ----------
+    n_knots : int
+        The chosen L.
+    curve : BSpline
+        The centerline with L knots, arc-length parametrised, mm.
+    met : bool
+        Both criteria hold for ``curve``.
+    trials : list of dict
+        Per candidate L tried: ``L``, ``speed_deviation``, ``min_wall_distance_ratio`` (the
+        smallest d(c_L(tau)) / d(reference) along the curve, dimensionless).
+    """
+
+    n_knots: int
+    curve: BSpline
+    met: bool
+    trials: list[dict]
+
+
+def choose_n_knots(
+    points: ArrayLike,
+    lumen: VoxelLumen,
+    reference: BSpline,
+    *,
+    end_directions: tuple[ArrayLike, ArrayLike] | None = None,
+    max_speed_deviation: float = 0.02,
+    min_distance_ratio: float = 0.5,
+    max_knots: int = 70,
+) -> KnotChoice:
+    """The smallest number of centerline knots L that fits the vessel (``--L auto``).
+
+    Paper Section 2.2.1 fixes L (9 in the paper) for every vessel; a long or tortuous vessel
+    needs more. Candidates L of :data:`L_LADDER` (from the paper's 9 up, never fewer) are fitted
+    to ``points`` (:func:`fit_centerline`: Eq. 1 with tau the normalised arc length) until one
+    meets both criteria:
+
+    * tau is the arc length: max| |c'| / mean |c'| - 1 | <= ``max_speed_deviation``
+      (:func:`speed_deviation`);
+    * the curve stays inside the lumen with a margin: along the curve, the distance to the wall
+      d (voxel distance field, trilinear) is at least ``min_distance_ratio`` times d at the
+      nearest point of ``reference`` (the re-centred curve: d there is the local lumen radius).
+
+    When no candidate up to ``max_knots`` meets both, the smallest L inside the lumen whose speed
+    deviation is within 0.005 of the smallest is taken (``met`` false; the fit report says so).
+
+    Parameters
+    ----------
+    points : (n, 3) float, mm
+        Ordered centres from c(0) to c(1) (:func:`section_centres`, or the lumen path).
+    lumen : VoxelLumen
+        Distance field d of the lumen.
+    reference : BSpline
+        The most central curve known (the re-centred working curve), mm.
+    end_directions : (d0, d1) of (3,) float, or None
+        Unit tangents imposed at tau = 0 and 1.
+    max_speed_deviation : float
+        Dimensionless (0.02: |c'| constant within 2 %).
+    min_distance_ratio : float
+        Dimensionless margin to the wall.
+    max_knots : int
+        Largest L tried.
+
+    Returns
+    -------
+    KnotChoice
+    """
+    pts = np.asarray(points, float)
+    ref_pts = reference(np.linspace(0.0, 1.0, 2001))
+    ref_d = np.maximum(lumen.distance_at(ref_pts), lumen.h)
+    tree = cKDTree(ref_pts)
+    tau = interior_samples(ref_d[[0, -1]], curve_length(reference))
+    trials: list[dict] = []
+    curves: dict[int, BSpline] = {}
+    for L in [v for v in L_LADDER if v <= max(max_knots, L_LADDER[0])]:
+        curve = fit_centerline(pts, L, end_directions=end_directions, n_resample=1000)
+        dev = speed_deviation(curve)
+        c = curve(tau)
+        ratio = float(np.min(lumen.distance_at(c) / ref_d[tree.query(c)[1]]))
+        trials.append({"L": L, "speed_deviation": dev, "min_wall_distance_ratio": ratio})
+        curves[L] = curve
+        if ratio >= min_distance_ratio and dev <= max_speed_deviation:
+            return KnotChoice(L, _full_reparam(curve, end_directions), True, trials)
+    # none meets both: inside with the margin, the smallest L within 0.005 of the smallest
+    # deviation (noisy centres make the deviation jump between neighbouring L); else the most
+    # central curve
+    inside = [t for t in trials if t["min_wall_distance_ratio"] >= min_distance_ratio]
+    if inside:
+        best_dev = min(t["speed_deviation"] for t in inside)
+        pick = next(t for t in inside if t["speed_deviation"] <= best_dev + 0.005)
+    else:
+        pick = max(trials, key=lambda t: t["min_wall_distance_ratio"])
+    return KnotChoice(int(pick["L"]), _full_reparam(curves[pick["L"]], end_directions), False, trials)
+
+
+def interior_samples(end_radii: ArrayLike, length: float, n: int = 801) -> NDArray[np.floating]:
+    """tau samples of a centerline away from its two ends, where a wall-distance margin means something.
+
+    Within one end radius of arc from an end the curve is pinned to the end centre, and the
+    wall distance there says more about the end plane than about the fit (on a closed surface
+    the cap itself counts as wall); those stretches (at most 10 % of the length each) are left out.
+
+    Parameters
+    ----------
+    end_radii : (2,) float, mm
+        Lumen radius at tau = 0 and tau = 1.
+    length : float, mm
+        Length of the centerline.
+    n : int
+        Number of samples.
+
+    Returns
+    -------
+    (n,) float
+        Equally spaced tau.
+    """
+    r0, r1 = (min(float(r), 0.1 * length) for r in np.asarray(end_radii, float))
+    return np.linspace(r0 / length, 1.0 - r1 / length, n)
+
+
+def _full_reparam(curve: BSpline, dirs: tuple[ArrayLike, ArrayLike] | None) -> BSpline:
+    """The final arc-length reparametrisation on the full 2000-sample table (:func:`reparametrise_by_arc_length`)."""
+    return reparametrise_by_arc_length(curve, end_directions=dirs, passes=2)
+
+
+def working_knots(length: float, radius: float, edge: float, *, lo: int = 9, hi: int = 50) -> int:
+    """Knots of the working curve that is re-centred before L is chosen (:func:`section_centres`).
+
+    One knot span per lumen radius of arc (a vessel cannot bend tighter than its radius), but
+    no finer than 2.5 mesh edges (the recentring windows), within [``lo``, ``hi``].
+
+    Parameters
+    ----------
+    length : float, mm
+        Length of the lumen path.
+    radius : float, mm
+        Median lumen radius along the path.
+    edge : float, mm
+        Mean edge length of the wall mesh.
+    lo, hi : int
+        Bounds.
+
+    Returns
+    -------
+    int
+    """
+    span = max(radius, 2.5 * edge, 1e-6)
+    return int(np.clip(int(np.ceil(length / span)) - 1, lo, hi))
+
+
 # ------------------------------------------------------------------ 5. re-centring (beyond the paper)
 
 
@@ -760,14 +955,55 @@ def recentre(
     *,
     iterations: int = 3,
     end_directions: tuple[ArrayLike, ArrayLike] | None = None,
+    n_knots: int | None = None,
 ) -> tuple[BSpline, list[float]]:
     """Move the centerline to the centres of the wall's cross-sections (the project's extension).
 
     Not in the paper: the voxel path cuts bends and carries the voxel staircase (errors of a few
-    tenths of a mm). Each iteration (:func:`recentre_step`) bins the wall vertices by tau; the
-    first Fourier harmonic of rho(theta) in a bin is the offset of the true centre, and the
-    spline (same L, same end points, same end directions) is refitted to the shifted bin
-    centres (:func:`fit_centerline`). ``iterations`` = 0 returns the paper's curve unchanged.
+    tenths of a mm). See :func:`section_centres`, which this wraps (it also returns the centres).
+
+    Parameters
+    ----------
+    curve : BSpline
+        Arc-length parametrised centerline (:func:`reparametrise_by_arc_length`), mm.
+    vertices : (N, 3) float, mm
+    wall_faces : (M, 3) int
+        Triangles of the wall.
+    iterations : int
+        Re-centring steps (0 returns ``curve`` unchanged).
+    end_directions : (d0, d1) of (3,) float, or None
+        As given to :func:`fit_spline`.
+    n_knots : int or None
+        L of the refits (default: that of ``curve``).
+
+    Returns
+    -------
+    curve : BSpline
+        The re-centred centerline, arc-length parametrised.
+    shifts : list of float, mm
+        Largest centre shift of each iteration.
+    """
+    curve, shifts, _ = section_centres(
+        curve, vertices, wall_faces, iterations=iterations, end_directions=end_directions, n_knots=n_knots
+    )
+    return curve, shifts
+
+
+def section_centres(
+    curve: BSpline,
+    vertices: NDArray[np.floating],
+    wall_faces: NDArray[np.integer],
+    *,
+    iterations: int = 3,
+    end_directions: tuple[ArrayLike, ArrayLike] | None = None,
+    n_knots: int | None = None,
+) -> tuple[BSpline, list[float], NDArray[np.floating]]:
+    """Centres of the wall's cross-sections along the centerline, and the curve refitted to them.
+
+    The project's extension of paper Section 2.2.1. Each iteration (:func:`recentre_step`) bins
+    the wall vertices by tau; the first Fourier harmonic of rho(theta) in a bin is the offset of
+    the true centre, and the spline (``n_knots`` uniform interior knots, same end points, same end
+    directions) is refitted to the shifted bin centres (:func:`fit_centerline`).
 
     Parameters
     ----------
@@ -777,9 +1013,11 @@ def recentre(
     wall_faces : (M, 3) int
         Triangles of the wall; each vertex votes with a third of its triangles' area.
     iterations : int
-        Re-centring steps.
+        Re-centring steps; 0 returns ``curve`` and its own dense samples.
     end_directions : (d0, d1) of (3,) float, or None
         As given to :func:`fit_spline`.
+    n_knots : int or None
+        L of the refits (default: that of ``curve``).
 
     Returns
     -------
@@ -787,6 +1025,20 @@ def recentre(
         The re-centred centerline, arc-length parametrised.
     shifts : list of float, mm
         Largest centre shift of each iteration.
+    centres : (n, 3) float, mm
+        The ordered points of the last refit: c(0), the section centres, c(1) (the data a
+        centerline with another L is fitted to, :func:`choose_n_knots`).
+
+    Notes
+    -----
+    Robustness (measured on the shared meshes, see README): a tau bin narrower than the spacing
+    of the mesh's rings holds a partial ring, whose Fourier fit is biased or rejected (a 100 mm
+    tube meshed at 1.5 mm drifted 1.4 mm off its axis at L = 18), so the per-bin sums are pooled
+    over a window of at least 2.5 mean wall edges and one knot span; only wall points whose normal is within 45 deg
+    of the radial direction vote (ostia, a bifurcation's crotch and obliquely cut sections do
+    not), and a window whose 5-term Fourier fit leaves an RMS residual above 10 % of its radius
+    (not a tube section: a branch, a stub) does not vote; bins that do not vote move with their
+    voting neighbours.
     """
     tri = vertices[wall_faces]
     area = 0.5 * np.linalg.norm(triangle_cross(tri), axis=1)
@@ -795,12 +1047,29 @@ def recentre(
     )
     used = w_vert > 0
     p0, p1 = curve.c[0], curve.c[-1]
-    n_knots = len(curve.t) - 2 * (curve.k + 1)
+    if n_knots is None:
+        n_knots = len(curve.t) - 2 * (curve.k + 1)
+    edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).mean()) if len(tri) else 0.0
+    # pooled over >= 2.5 mesh edges (whole rings) and >= one knot span (the curve cannot follow
+    # finer detail anyway; wider windows average the noise of bumpy surfaces and ostia out)
+    window_mm = max(2.5 * edge, curve_length(curve) / (n_knots + 1))
+    normals = vertex_normals(vertices, wall_faces)[used]
     shifts = []
+    centres = curve(np.linspace(0.0, 1.0, 257))
     for _ in range(iterations):
-        curve, shift = recentre_step(curve, vertices[used], w_vert[used], p0, p1, n_knots, end_directions)
+        curve, shift, centres = recentre_step(
+            curve,
+            vertices[used],
+            w_vert[used],
+            p0,
+            p1,
+            n_knots,
+            end_directions,
+            window_mm=window_mm,
+            normals=normals,
+        )
         shifts.append(shift)
-    return curve, shifts
+    return curve, shifts, centres
 
 
 def recentre_step(
@@ -812,8 +1081,10 @@ def recentre_step(
     n_knots: int,
     dirs: tuple[ArrayLike, ArrayLike] | None = None,
     n_bins: int | None = None,
-) -> tuple[BSpline, float]:
-    """One re-centring step of :func:`recentre`.
+    window_mm: float = 0.0,
+    normals: NDArray[np.floating] | None = None,
+) -> tuple[BSpline, float, NDArray[np.floating]]:
+    """One re-centring step of :func:`section_centres`.
 
     Parameters
     ----------
@@ -831,6 +1102,12 @@ def recentre_step(
         End tangent directions of the refit.
     n_bins : int or None
         tau bins (default max(32, 6 (L + 4))).
+    window_mm : float, mm
+        Each bin's centre is fitted to the wall points of the bins within +- ``window_mm`` / 2
+        of arc (at least its own bin), so that a bin never sees a partial ring of the mesh.
+    normals : (N, 3) float or None
+        Unit vertex normals (either orientation); when given, only vertices whose normal is
+        within 45 deg of the radial direction vote.
 
     Returns
     -------
@@ -838,46 +1115,118 @@ def recentre_step(
         The refitted centerline.
     shift : float, mm
         Largest centre shift applied.
+    centres : (n_bins + 2, 3) float, mm
+        c(0), the shifted bin centres in tau order, c(1): the data of the refit.
     """
     frame = ParallelTransportFrame(curve, _any_normal(curve.derivative()(0.0)))
     tau, theta, rho, ok = to_vcs(curve, frame, CurveIndex.from_curve(curve, curve_length(curve)), pts)
     n_bins = n_bins or max(32, 6 * (n_knots + 4))
     ok &= (tau > 0) & (tau < 1)
+    if normals is not None:
+        radial = (pts - curve(tau)) / np.maximum(rho, 1e-300)[:, None]
+        ok &= np.abs(np.einsum("ij,ij->i", normals, radial)) > np.cos(np.pi / 4)
     b = np.minimum((tau * n_bins).astype(int), n_bins - 1)
     # robust: points far beyond their bin's median radius (branches, outliers) do not vote
-    med = np.zeros(n_bins)
-    for k in np.unique(b[ok]):
-        med[k] = np.median(rho[ok & (b == k)])
-    ok &= rho < 1.5 * med[b]
+    med = group_median(b[ok], rho[ok], n_bins)
+    ok &= (rho < 1.5 * med[b]) & (rho > 0.5 * med[b])
     X = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta), np.cos(2 * theta), np.sin(2 * theta)])
     Xw = X * (w * ok)[:, None]
     A = np.zeros((n_bins, 5, 5))
     y = np.zeros((n_bins, 5))
     np.add.at(A, b, Xw[:, :, None] * X[:, None, :])
     np.add.at(y, b, Xw * rho[:, None])
-    tsum = np.bincount(b, w * ok, minlength=n_bins)
+    yy: NDArray[np.float64] = np.bincount(b, w * ok * rho**2, minlength=n_bins).astype(float)
+    tsum: NDArray[np.float64] = np.bincount(b, w * ok, minlength=n_bins).astype(float)
     tmean = np.bincount(b, w * ok * tau, minlength=n_bins) / np.where(tsum > 0, tsum, 1)
-    cnt = np.bincount(b, ok.astype(float), minlength=n_bins)
+    cnt: NDArray[np.float64] = np.bincount(b, ok.astype(float), minlength=n_bins).astype(float)
     # a bin votes only when its wall points surround the curve (all 8 theta octants present):
     # bins cut by an oblique end plane or a gap would give a biased centre
     octant = np.minimum((theta / (np.pi / 4)).astype(int), 7)
-    cover = np.zeros((n_bins, 8), bool)
-    cover[b[ok], octant[ok]] = True
-    good = (cnt >= 12) & cover.all(axis=1)
+    cover = np.zeros((n_bins, 8))
+    cover[b[ok], octant[ok]] = 1.0
+    half = int(np.ceil(0.5 * window_mm * n_bins / max(curve_length(curve), 1e-9) - 0.5))
+    if half > 0:  # pool the sums of the 2 half + 1 bins around each bin
+        A = _window_sum(A, half)
+        y = _window_sum(y, half)
+        cover = _window_sum(cover, half)
+        yy = _window_sum(yy.astype(float), half)
+        tw = _window_sum(tmean * tsum, half)
+        tsum = _window_sum(tsum.astype(float), half)
+        cnt = _window_sum(cnt.astype(float), half)
+        tmean = tw / np.where(tsum > 0, tsum, 1)
+    good = (cnt >= 12) & (cover > 0).all(axis=1)
     good[good] &= np.linalg.cond(A[good]) < 1e8
     coef = np.zeros((n_bins, 5))
     coef[good] = np.linalg.solve(A[good], y[good][..., None])[..., 0]
-    # bins that do not vote keep the current curve, so the refit is constrained everywhere
+    # not a tube section (a branch, a stub, a crotch): the 5-term fit leaves > 10 % RMS residual
+    sse = yy - 2 * np.einsum("ij,ij->i", coef, y) + np.einsum("ij,ijk,ik->i", coef, A, coef)
+    rms = np.sqrt(np.maximum(sse, 0.0) / np.where(tsum > 0, tsum, 1))
+    good &= rms <= 0.1 * np.abs(coef[:, 0])
     tb = np.where(good, tmean, (np.arange(n_bins) + 0.5) / n_bins)
     _, v1, v2 = frame(tb)
     shift = (coef[:, 1:2] * v1 + coef[:, 2:3] * v2) * good[:, None]
     size = np.linalg.norm(shift, axis=1, keepdims=True)
     cap = 0.25 * np.abs(coef[:, :1])  # never move by more than a quarter of the local radius per step
     shift *= np.minimum(1.0, cap / np.maximum(size, 1e-300))
-    new = curve(tb) + shift
-    order = np.argsort(tb)
-    fitted = fit_centerline(np.vstack([p0, new[order], p1]), n_knots, end_directions=dirs)
-    return fitted, float(np.linalg.norm(shift, axis=1).max(initial=0.0))
+    # the data of the refit are the voting bins' centres only: bins that do not vote (gaps at
+    # branches, the ends where points project beyond the end) are bridged by the spline and its
+    # smoothness penalty instead of keeping the current curve there, whose wiggles (the voxel
+    # path's staircase) would otherwise survive every iteration
+    if good.sum() >= max(8, n_knots // 2):
+        order = np.argsort(tb[good])
+        data = np.vstack([p0, (curve(tb) + shift)[good][order], p1])
+    else:  # almost nothing votes: keep the curve
+        data = np.vstack([p0, curve((np.arange(n_bins) + 0.5) / n_bins), p1])
+    fitted = fit_centerline(data, n_knots, end_directions=dirs)
+    return fitted, float(np.linalg.norm(shift, axis=1).max(initial=0.0)), data
+
+
+def group_median(groups: NDArray[np.integer], values: NDArray[np.floating], n_groups: int) -> NDArray[np.floating]:
+    """Median of ``values`` per group (vectorised: one sort), 0 for empty groups.
+
+    Parameters
+    ----------
+    groups : (N,) int
+        Group index of each value, in [0, n_groups).
+    values : (N,) float
+    n_groups : int
+
+    Returns
+    -------
+    (n_groups,) float
+        Units of ``values``.
+    """
+    out = np.zeros(n_groups)
+    if len(values) == 0:
+        return out
+    order = np.lexsort((values, groups))
+    g, v = groups[order], values[order]
+    counts = np.bincount(g, minlength=n_groups)
+    start = np.cumsum(counts) - counts
+    has = counts > 0
+    lo = start[has] + (counts[has] - 1) // 2
+    hi = start[has] + counts[has] // 2
+    out[has] = 0.5 * (v[lo] + v[hi])
+    return out
+
+
+def _window_sum(a: NDArray[np.float64], half: int) -> NDArray[np.float64]:
+    """Sums of ``a`` over the window of bins [i - half, i + half] along its first axis (clipped at the ends).
+
+    Parameters
+    ----------
+    a : (n, ...) float
+        Per-bin values.
+    half : int
+        Half-width of the window, in bins.
+
+    Returns
+    -------
+    (n, ...) float
+    """
+    c = np.concatenate([np.zeros((1, *a.shape[1:])), np.cumsum(a, axis=0)])
+    i = np.arange(len(a))
+    return c[np.minimum(i + half + 1, len(a))] - c[np.maximum(i - half, 0)]
 
 
 def _any_normal(t: NDArray[np.floating]) -> NDArray[np.floating]:

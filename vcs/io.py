@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
-from vcs.mesh import consistent_winding, triangle_cross
+from vcs.mesh import consistent_winding, lumen_chords, triangle_cross
 
 if TYPE_CHECKING:
     import pyvista as pv
@@ -46,6 +46,9 @@ class Surface:
         The file that was read.
     warnings : tuple of str
         Repairs made while reading (degenerate triangles removed, winding fixed, ...).
+    units_evidence : dict
+        With ``units="auto"``: the measurements behind the choice (:attr:`UnitsGuess.evidence`);
+        empty for given units.
     """
 
     vertices: NDArray[np.floating]
@@ -55,39 +58,178 @@ class Surface:
     units_source: str = "given"
     path: str = ""
     warnings: tuple[str, ...] = ()
+    units_evidence: dict[str, Any] = field(default_factory=dict)
 
     @property
     def scale_to_mm(self) -> float:
         """Millimetres per unit of the input file (1, 10 or 1000)."""
         return UNIT_TO_MM[self.units]
 
+    @property
+    def lumen_radius_mm(self) -> float | None:
+        """Median lumen radius (mm) measured for ``--units auto``; None when the units were given."""
+        r = self.units_evidence.get("candidates", {}).get(self.units, {}).get("median_lumen_radius_mm")
+        return None if r is None else float(r)
 
-def guess_units(extent: float) -> tuple[str, str]:
-    """Guess the length unit of a vessel surface from its largest bounding-box extent.
 
-    Human vessel sections span a few centimetres to ~40 cm. A largest extent below 1.0 is read as
-    metres, from 1.0 to below 25 as centimetres, otherwise millimetres. The decision and the
-    reason are reported; give ``--units`` explicitly when in doubt.
+# --units auto: human lumen radii (coronary ~1 mm to an aneurysmal aorta ~25 mm) and a typical
+# vessel section (median lumen radius ~6 mm, between small arteries ~3 mm and aortas ~12 mm;
+# largest extent ~120 mm); the extent only breaks ties between units whose radii are both plausible
+PLAUSIBLE_RADIUS_MM = (1.0, 25.0)
+TYPICAL_RADIUS_MM = 6.0
+TYPICAL_EXTENT_MM = 120.0
+EXTENT_WEIGHT = 0.5
+AMBIGUOUS_SCORE_MARGIN = 1.0
+
+
+@dataclass(frozen=True)
+class UnitsGuess:
+    """The units ``--units auto`` chose, why, and the measurements behind it.
+
+    Attributes
+    ----------
+    unit : str
+        ``"mm"``, ``"cm"`` or ``"m"``.
+    reason : str
+        One sentence for the report (``units_source``), starting with ``auto:``.
+    evidence : dict
+        JSON-ready: ``median_lumen_radius`` and ``largest_extent`` (file units), ``n_chords``,
+        ``rule``, and per candidate unit the radius and extent in mm, ``plausible`` and ``score``.
+    warning : str or None
+        Set when another unit is nearly as likely (the user should check and give ``--units``).
+    """
+
+    unit: str
+    reason: str
+    evidence: dict[str, Any]
+    warning: str | None = None
+
+
+def guess_units(radius: float | None, extent: float) -> UnitsGuess:
+    """Guess the length unit of a vessel surface from its lumen radius (extent as a tie-breaker).
+
+    For each unit (m, cm, mm) the median lumen radius ``radius`` and the largest bounding-box
+    extent ``extent`` are converted to mm. A unit is plausible when the radius lies in
+    :data:`PLAUSIBLE_RADIUS_MM` (1-25 mm, human vessels); among the plausible units (all units if
+    none is) the one with the lowest score ln(r / 6 mm)^2 + 0.5 ln(E / 120 mm)^2 wins: the radius
+    nearest a typical vessel radius, the extent deciding between units whose radii are both
+    plausible (a 35 cm long aorta of radius 1.2 cm written in cm is cm; a 60 mm long carotid of
+    radius 2 mm is mm). Another plausible unit within :data:`AMBIGUOUS_SCORE_MARGIN` of the best
+    gives a warning. Without a radius (no chord found), the extent alone decides as before:
+    below 1 -> m, below 25 -> cm, else mm.
 
     Parameters
     ----------
+    radius : float or None
+        Median lumen radius in the (unknown) units of the file, e.g. half the median of
+        :func:`vcs.mesh.lumen_chords`; None when unknown.
     extent : float
-        Largest bounding-box extent of the surface, in the (unknown) units of the file.
+        Largest bounding-box extent of the surface, in the units of the file.
 
     Returns
     -------
-    unit : str
-        ``"m"``, ``"cm"`` or ``"mm"``.
-    reason : str
-        One sentence for the report.
+    UnitsGuess
     """
-    if extent < 1.0:
-        unit = "m"
-    elif extent < 25.0:
-        unit = "cm"
-    else:
-        unit = "mm"
-    return unit, f"auto: largest bounding-box extent {extent:.4g} read as {unit}"
+    if radius is None or not np.isfinite(radius) or radius <= 0:
+        unit = "m" if extent < 1.0 else "cm" if extent < 25.0 else "mm"
+        reason = f"auto: no lumen radius measured; largest bounding-box extent {extent:.4g} read as {unit}"
+        return UnitsGuess(unit, reason, {"largest_extent": extent, "rule": "extent <1 m, <25 cm, else mm"})
+    lo, hi = PLAUSIBLE_RADIUS_MM
+    cands: dict[str, dict[str, Any]] = {}
+    for u in ("m", "cm", "mm"):
+        r_mm, e_mm = radius * UNIT_TO_MM[u], extent * UNIT_TO_MM[u]
+        score = np.log(r_mm / TYPICAL_RADIUS_MM) ** 2 + EXTENT_WEIGHT * np.log(e_mm / TYPICAL_EXTENT_MM) ** 2
+        cands[u] = {
+            "median_lumen_radius_mm": float(r_mm),
+            "largest_extent_mm": float(e_mm),
+            "plausible": bool(lo <= r_mm <= hi),
+            "score": round(float(score), 4),
+        }
+    pool = [u for u in cands if cands[u]["plausible"]] or list(cands)
+    ranked = sorted(pool, key=lambda u: cands[u]["score"])
+    unit = ranked[0]
+    c = cands[unit]
+    reason = (
+        f"auto: median lumen radius {radius:.4g} and largest extent {extent:.4g} read as {unit} "
+        f"(radius {c['median_lumen_radius_mm']:.3g} mm, extent {c['largest_extent_mm']:.4g} mm; "
+        f"human vessel radii are {lo:g}-{hi:g} mm)"
+    )
+    warning = None
+    if not cands[unit]["plausible"]:
+        warning = (
+            f"units auto: no unit gives a human vessel radius ({lo:g}-{hi:g} mm); read as {unit} "
+            f"(radius {c['median_lumen_radius_mm']:.3g} mm): check it and give --units"
+        )
+    elif len(ranked) > 1 and cands[ranked[1]]["score"] - c["score"] < AMBIGUOUS_SCORE_MARGIN:
+        o = cands[ranked[1]]
+        warning = (
+            f"units auto: read as {unit} (radius {c['median_lumen_radius_mm']:.3g} mm, extent "
+            f"{c['largest_extent_mm']:.4g} mm), but {ranked[1]} is nearly as plausible (radius "
+            f"{o['median_lumen_radius_mm']:.3g} mm, extent {o['largest_extent_mm']:.4g} mm); "
+            f"give --units {ranked[1]} if the mesh is in {ranked[1]}"
+        )
+    evidence = {
+        "median_lumen_radius": float(radius),
+        "largest_extent": float(extent),
+        "rule": (
+            f"radius in {lo:g}-{hi:g} mm, then lowest ln(r/{TYPICAL_RADIUS_MM:g} mm)^2 + "
+            f"{EXTENT_WEIGHT:g} ln(extent/{TYPICAL_EXTENT_MM:g} mm)^2"
+        ),
+        "candidates": cands,
+    }
+    return UnitsGuess(unit, reason, evidence, warning)
+
+
+def measure_units(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> UnitsGuess:
+    """:func:`guess_units` of a surface: its median lumen radius by ray casting and its extent.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        Vertex coordinates in the (unknown) units of the file.
+    faces : (M, 3) int
+        Triangles, consistently wound.
+
+    Returns
+    -------
+    UnitsGuess
+        With ``evidence["n_chords"]``, the number of chords measured (:func:`vcs.mesh.lumen_chords`).
+    """
+    chords = lumen_chords(vertices, faces)
+    radius = 0.5 * float(np.median(chords)) if len(chords) >= 8 else None
+    guess = guess_units(radius, float(np.ptp(vertices, axis=0).max()))
+    guess.evidence["n_chords"] = int(len(chords))
+    return guess
+
+
+def _is_ascii_stl(path: Path) -> bool:
+    """True for an ASCII STL file (it starts with ``solid`` and its second line is a facet or endsolid)."""
+    if path.suffix.lower() != ".stl":
+        return False
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+    lines = head.lstrip().split(b"\n", 2)
+    return head.lstrip().startswith(b"solid") and len(lines) > 1 and lines[1].strip()[:5] in (b"facet", b"endso")
+
+
+def _read_ascii_stl_solids(path: Path) -> pv.PolyData:
+    """An ASCII STL read by VTK's STL reader (as pyvista does) with its solids as a cell array.
+
+    A multi-solid STL (``solid wall`` ... ``solid inlet`` ...) gets the cell array
+    ``STLSolidLabeling`` (0, 1, ... in file order), so that caps written as separate solids are
+    labelled caps (:func:`vcs.ends.list_ends`); a single-solid file gets no array.
+    """
+    import pyvista as pv
+    from vtkmodules.vtkIOGeometry import vtkSTLReader
+
+    reader = vtkSTLReader()
+    reader.SetFileName(str(path))
+    reader.ScalarTagsOn()
+    reader.Update()
+    mesh = pv.wrap(reader.GetOutput())
+    if "STLSolidLabeling" in mesh.cell_data and len(np.unique(mesh.cell_data["STLSolidLabeling"])) < 2:
+        del mesh.cell_data["STLSolidLabeling"]
+    return mesh
 
 
 def _read_polydata(path: Path) -> pv.PolyData:
@@ -98,7 +240,7 @@ def _read_polydata(path: Path) -> pv.PolyData:
     vtk.vtkObject.GlobalWarningDisplayOff()  # reader errors become our one-line message
 
     try:
-        mesh = pv.read(str(path))
+        mesh = _read_ascii_stl_solids(path) if _is_ascii_stl(path) else pv.read(str(path))
     except Exception as exc:  # VTK readers raise many kinds of errors
         raise VCSInputError(
             f"cannot read '{path}' as a surface mesh ({type(exc).__name__}); "
@@ -122,7 +264,7 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
     path : Path or str
         Surface file.
     units : {"auto", "mm", "cm", "m"}
-        Units of the file; ``auto`` uses :func:`guess_units`.
+        Units of the file; ``auto`` uses :func:`measure_units` (lumen radius, then extent).
     check_extent : bool
         Refuse explicit units that make the surface smaller than 5 mm or larger than 3 m (a whole
         vessel); off for cap surfaces.
@@ -186,19 +328,23 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
     if winding:
         warnings.append("inconsistent triangle winding repaired")
     extent = float(np.ptp(vertices, axis=0).max())
+    evidence: dict[str, Any] = {}
     if units == "auto":
-        units, source = guess_units(extent)
+        guess = measure_units(vertices, faces)
+        units, source, evidence = guess.unit, guess.reason, guess.evidence
+        if guess.warning:
+            warnings.append(guess.warning)
     else:
         source = "given"
         extent_mm = extent * UNIT_TO_MM[units]
         if check_extent and not 5.0 <= extent_mm <= 3000.0:
-            better = guess_units(extent)[0]
+            better = measure_units(vertices, faces).unit
             raise VCSInputError(
                 f"with --units {units} the mesh spans {extent_mm:.3g} mm, not a blood vessel; "
                 f"is it in {better}? give --units {better} (or auto)"
             )
     vertices = vertices * UNIT_TO_MM[units]
-    return Surface(vertices, faces, cell_data, units, source, str(path), tuple(warnings))
+    return Surface(vertices, faces, cell_data, units, source, str(path), tuple(warnings), evidence)
 
 
 def read_points_table(path: Path | str) -> NDArray[np.floating]:

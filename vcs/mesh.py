@@ -1,10 +1,10 @@
 """Triangle-mesh helpers shared by the whole package: per-triangle cross products, areas and normals,
 vertex normals, edges and half-edges, boundary loops, connected components, winding repair,
-enclosed volume, a ray-parity inside test, and STL/VTP I/O.
+enclosed volume, a ray-parity inside test, chords across the lumen (ray casting), and STL/VTP I/O.
 
 Plain vectorised functions on arrays (``vertices``: (N, 3) float, ``faces``: (M, 3) int, or
 ``tris``: (M, 3, 3) float triangle corners), in whatever length unit the caller uses.
-pyvista is imported only inside the VTP writers.
+pyvista is imported only inside the VTP writers, VTK only inside :func:`lumen_chords`.
 """
 
 from __future__ import annotations
@@ -23,7 +23,9 @@ __all__ = [
     "consistent_winding",
     "edge_topology",
     "half_edges",
+    "lumen_chords",
     "orient_outward",
+    "point_triangle_distance",
     "points_inside",
     "polygon_properties",
     "read_stl_solids",
@@ -116,6 +118,143 @@ def vertex_normals(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
+def point_triangle_distance(
+    points: ArrayLike, tris: NDArray[np.floating], chunk: int = 2_000_000
+) -> NDArray[np.floating]:
+    """Exact Euclidean distance from each point to the nearest of the triangles (brute force).
+
+    Closest point on a triangle by the Voronoi regions of its vertices, edges and face
+    (Ericson, Real-Time Collision Detection, 5.1.5), vectorised over points x triangles in chunks.
+
+    Parameters
+    ----------
+    points : (P, 3) float
+        Query points (length units of ``tris``).
+    tris : (M, 3, 3) float
+        Triangle corners.
+    chunk : int
+        Point-triangle pairs per vectorised block (memory bound).
+
+    Returns
+    -------
+    (P,) float
+        Distances (length units), inf when there is no triangle.
+    """
+    pts = np.atleast_2d(np.asarray(points, float))
+    out = np.full(len(pts), np.inf)
+    if len(tris) == 0:
+        return out
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    ab, ac = b - a, c - a
+    step = max(1, chunk // max(len(tris), 1))
+    for i in range(0, len(pts), step):
+        p = pts[i : i + step, None, :]  # (q, 1, 3)
+        ap, bp, cp = p - a, p - b, p - c
+        d1, d2 = np.einsum("qmk,mk->qm", ap, ab), np.einsum("qmk,mk->qm", ap, ac)
+        d3, d4 = np.einsum("qmk,mk->qm", bp, ab), np.einsum("qmk,mk->qm", bp, ac)
+        d5, d6 = np.einsum("qmk,mk->qm", cp, ab), np.einsum("qmk,mk->qm", cp, ac)
+        va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+        den = np.where(np.abs(va + vb + vc) > 0, va + vb + vc, 1.0)
+        v, w = vb / den, vc / den  # face region by default
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # edge regions (ab, ac, bc), then vertex regions, in the order that makes them win
+            m = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
+            t = np.where(m, d1 / np.where(d1 - d3 != 0, d1 - d3, 1.0), 0.0)
+            v, w = np.where(m, t, v), np.where(m, 0.0, w)
+            m = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+            t = np.where(m, d2 / np.where(d2 - d6 != 0, d2 - d6, 1.0), 0.0)
+            v, w = np.where(m, 0.0, v), np.where(m, t, w)
+            m = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)
+            t = np.where(m, (d4 - d3) / np.where((d4 - d3) + (d5 - d6) != 0, (d4 - d3) + (d5 - d6), 1.0), 0.0)
+            v, w = np.where(m, 1.0 - t, v), np.where(m, t, w)
+        m = (d1 <= 0) & (d2 <= 0)
+        v, w = np.where(m, 0.0, v), np.where(m, 0.0, w)
+        m = (d3 >= 0) & (d4 <= d3)
+        v, w = np.where(m, 1.0, v), np.where(m, 0.0, w)
+        m = (d6 >= 0) & (d5 <= d6)
+        v, w = np.where(m, 0.0, v), np.where(m, 1.0, w)
+        closest = a + v[..., None] * ab + w[..., None] * ac
+        out[i : i + step] = np.linalg.norm(p - closest, axis=-1).min(axis=1)
+    return out
+
+
+def lumen_chords(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], n_rays: int = 256, seed: int = 0
+) -> NDArray[np.floating]:
+    """Chords across the lumen: from wall samples along the wall normal to the first wall hit.
+
+    ``n_rays`` triangles are drawn by area (fixed ``seed``: the same mesh gives the same chords);
+    from each centroid a ray is cast both ways along the mean normal of its corners (VTK's
+    OBB tree). On a tube the ray into the lumen crosses it (chord ~ the diameter, longer where it
+    runs along the axis near an end) and the ray out of it mostly meets nothing: the direction with
+    more hits is the lumen side, whatever the winding. Half the median chord is a robust lumen
+    radius, independent of the units, the ends and the branches.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        Vertex coordinates (any length unit; the chords are in the same unit).
+    faces : (M, 3) int
+        Triangles, consistently wound.
+    n_rays : int
+        Rays cast (fewer when the mesh has fewer triangles).
+    seed : int
+        Seed of the area-weighted draw of the triangles.
+
+    Returns
+    -------
+    (K,) float
+        Chord lengths of the rays on the lumen side that hit the wall (K <= n_rays; empty when
+        none did, e.g. a flat sheet), in the units of ``vertices``.
+    """
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkIdList, vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkFiltersGeneral import vtkOBBTree
+
+    v = np.ascontiguousarray(vertices, dtype=float)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    area = triangle_areas(v, f)
+    if len(f) == 0 or not area.sum() > 0:
+        return np.zeros(0)
+    points = vtkPoints()
+    points.SetData(numpy_to_vtk(v, deep=True))
+    cells = vtkCellArray()
+    cells.SetData(
+        numpy_to_vtkIdTypeArray(np.arange(0, 3 * len(f) + 1, 3, dtype=np.int64), deep=True),
+        numpy_to_vtkIdTypeArray(f.ravel(), deep=True),
+    )
+    poly = vtkPolyData()
+    poly.SetPoints(points)
+    poly.SetPolys(cells)
+    tree = vtkOBBTree()
+    tree.SetDataSet(poly)
+    tree.BuildLocator()
+
+    rng = np.random.default_rng(seed)
+    picked = np.sort(rng.choice(len(f), size=min(n_rays, len(f)), replace=False, p=area / area.sum()))
+    vn = vertex_normals(v, f)
+    origin = v[f[picked]].mean(axis=1)
+    direction = vn[f[picked]].sum(axis=1)
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+    reach = 2.0 * float(np.ptp(v, axis=0).max())
+    eps = 1e-7 * reach
+    hits: dict[int, list[float]] = {1: [], -1: []}
+    found, ids = vtkPoints(), vtkIdList()
+    for p0, d, own in zip(origin, direction, picked):
+        for sign in (1, -1):
+            tree.IntersectWithLine(p0 + sign * eps * d, p0 + sign * reach * d, found, ids)
+            best = np.inf
+            for k in range(found.GetNumberOfPoints()):
+                dist = float(np.linalg.norm(np.asarray(found.GetPoint(k)) - p0))
+                if ids.GetId(k) != own and dist > 10 * eps:
+                    best = min(best, dist)
+            if np.isfinite(best):
+                hits[sign].append(best)
+    side = max((1, -1), key=lambda s: (len(hits[s]), -float(np.median(hits[s])) if hits[s] else 0.0))
+    return np.asarray(hits[side], dtype=float)
+
+
 def signed_volume(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> float:
     """Signed volume enclosed by a closed triangle mesh (divergence theorem).
 
@@ -202,10 +341,11 @@ def edge_topology(faces: NDArray[np.integer]) -> tuple[NDArray[np.integer], NDAr
     counts : (E,) int
         Faces using each edge (1: boundary, 2: manifold interior, > 2: non-manifold).
     """
-    e = half_edges(faces)[0]
+    e = half_edges(faces)[0].astype(np.int64)
     e.sort(axis=1)
-    edges, counts = np.unique(e, axis=0, return_counts=True)
-    return edges, counts
+    n = int(e.max()) + 1 if len(e) else 1
+    keys, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)  # 1-D keys: same order, faster
+    return np.column_stack([keys // n, keys % n]).astype(faces.dtype, copy=False), counts
 
 
 def boundary_loops(faces: NDArray[np.integer]) -> list[NDArray[np.integer]]:

@@ -9,21 +9,25 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline
 
-from vcs import coords as _coords
+import vcs.coords as _coords
 from vcs.centerline import (
     VoxelLumen,
+    choose_n_knots,
     curve_length,
     end_tangents,
-    fit_spline,
+    fit_centerline,
+    interior_samples,
     lumen_path,
     lumen_voxels,
-    recentre,
-    reparametrise_by_arc_length,
+    section_centres,
+    speed_deviation,
     voxel_size,
+    working_knots,
 )
 from vcs.ends import End, Ends
 from vcs.errors import VCSInputError
 from vcs.frame import ParallelTransportFrame, initial_v1_from_wall, wall_centroid
+from vcs.mesh import point_triangle_distance
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +76,7 @@ class VesselCoordinateSystem:
         faces: NDArray[np.integer],
         ends: Ends,
         *,
-        n_knots: int = 9,
+        n_knots: int | str = "auto",
         voxels_per_radius: float = 6.0,
         max_voxels: float = 4e6,
         recentre_iterations: int = 3,
@@ -80,10 +84,14 @@ class VesselCoordinateSystem:
         """Build the VCS of the section between ``ends`` (paper Sections 2.2.1-2.2.2).
 
         The steps, each a function of :mod:`vcs.centerline` or :mod:`vcs.frame`: lumen voxels and
-        their distance d to the wall; the lowest-cost path (cost 1/d) from p_A to p_B; the
-        least-squares spline with L knots; its arc-length reparametrisation; re-centring on the
-        wall (beyond the paper, see :func:`vcs.centerline.recentre`); v1(0) from the wall
-        centroid and the parallel-transport frame.
+        their distance d to the wall; the lowest-cost path (cost 1/d) from p_A to p_B; a working
+        spline (:func:`vcs.centerline.working_knots` knots, one span per 0.75 lumen radius)
+        re-centred on the wall's cross-sections (beyond the paper,
+        :func:`vcs.centerline.section_centres`); the centerline with L knots fitted to those
+        centres and re-parametrised by arc length (Eq. 1), L given or chosen
+        (:func:`vcs.centerline.choose_n_knots`); v1(0) from the wall centroid and the
+        parallel-transport frame. With ``recentre_iterations`` = 0 the centerline is fitted to
+        the lumen path itself (the paper's curve).
 
         Parameters
         ----------
@@ -92,8 +100,9 @@ class VesselCoordinateSystem:
             The vessel surface; ``faces[ends.wall_mask]`` is the wall.
         ends : Ends
             From :func:`vcs.ends.find_ends`.
-        n_knots : int
-            L, the centerline's uniform interior knots (paper default 9).
+        n_knots : int or "auto"
+            L, the centerline's uniform interior knots (paper default 9); "auto": the smallest
+            L >= 9 keeping the curve inside the lumen with a margin and |c'| constant within 2 %.
         voxels_per_radius : float
             Voxels across the smaller end radius.
         max_voxels : float
@@ -104,9 +113,12 @@ class VesselCoordinateSystem:
         Returns
         -------
         VesselCoordinateSystem
-            The build report (voxel size, timings, checks) is in ``.report``.
+            The build report (voxel size, L and how it was chosen, timings, checks) is in ``.report``.
         """
-        if n_knots < 1:
+        auto = isinstance(n_knots, str)
+        if auto and n_knots != "auto":
+            raise VCSInputError(f"L = {n_knots!r}: give a number of knots (paper default 9) or 'auto'")
+        if not auto and int(n_knots) < 1:
             raise VCSInputError(f"L = {n_knots} knots is too few; use L >= 1 (paper default 9)")
         t0 = time.perf_counter()
         h = voxel_size(ends, voxels_per_radius=voxels_per_radius, max_voxels=max_voxels)
@@ -114,18 +126,38 @@ class VesselCoordinateSystem:
         t_vox = time.perf_counter()
         path, inlet, outlet = lumen_path(vertices, faces, ends, lumen)
         t_path = time.perf_counter()
-        if n_knots > max(9, len(path)):  # at most one knot per path voxel (the default always fits)
+        if not auto and int(n_knots) > max(9, len(path)):  # at most one knot per path voxel
             raise VCSInputError(
                 f"L = {n_knots} centerline knots is too many for a lumen path of {len(path)} voxels; "
                 f"use L <= {max(9, len(path))} (paper default 9)"
             )
         dirs = end_tangents(inlet, outlet)
-        curve = fit_spline(np.vstack([inlet.center, path, outlet.center]), n_knots, end_directions=dirs)
-        curve = reparametrise_by_arc_length(curve, end_directions=dirs)
-        t_fit = time.perf_counter()
+        pts = np.vstack([inlet.center, path, outlet.center])
         wall_faces = faces[ends.wall_mask]
-        curve, shifts = recentre(curve, vertices, wall_faces, iterations=recentre_iterations, end_directions=dirs)
+        tri = vertices[wall_faces]
+        edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).mean())
+        path_len = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        radius = float(np.median(lumen.distance_at(path)))
+        L_work = working_knots(path_len, radius, edge)
+        L_work = min(L_work, max(9, len(path) // 2))
+        working = fit_centerline(pts, L_work, end_directions=dirs)
+        t_fit = time.perf_counter()
+        shifts: list[float] = []
+        data = pts
+        if recentre_iterations > 0:
+            working, shifts, data = section_centres(
+                working, vertices, wall_faces, iterations=recentre_iterations, end_directions=dirs
+            )
         t_recentre = time.perf_counter()
+        choice = None
+        if auto:
+            choice = choose_n_knots(
+                data, lumen, working, end_directions=dirs, max_knots=max(9, min(L_work, len(data) // 2))
+            )
+            curve = choice.curve
+        else:
+            curve = fit_centerline(data, int(n_knots), end_directions=dirs)
+        t_choose = time.perf_counter()
         v1_0, how = initial_v1_from_wall(curve, wall_centroid(vertices, wall_faces))
         self = cls(curve, v1_0, v1_0_from=how)
         t_frame = time.perf_counter()
@@ -135,9 +167,22 @@ class VesselCoordinateSystem:
             "astar": t_path - t_vox,
             "spline_fit": t_fit - t_path,
             "recentre": t_recentre - t_fit,
-            "frame": t_frame - t_recentre,
+            "choose_L": t_choose - t_recentre,
+            "frame": t_frame - t_choose,
         }
         self.report = _build_report(self, ends, inlet, outlet, lumen, path, shifts, timings)
+        self.report.update(
+            _centerline_checks(curve, working, lumen, vertices[wall_faces]),
+            L_source="auto" if auto else "given",
+            L_working=int(L_work),
+        )
+        if choice is not None:
+            self.report["L_auto"] = {
+                "criteria_met": choice.met,
+                "max_speed_deviation": 0.02,
+                "min_wall_distance_ratio": 0.5,
+                "tried": choice.trials,
+            }
         if not self.report["centerline_inside_lumen"]:
             log.warning(
                 "centerline leaves the voxelised lumen (min distance %.3f mm)",
@@ -220,8 +265,6 @@ def _build_report(
 ) -> dict:
     """The build report of :meth:`VesselCoordinateSystem.from_surface` (keys as in fit_report.json)."""
     curve = vcs.curve
-    wall_d = lumen.distance_at(curve(np.linspace(0.02, 0.98, 961)))
-    speed = np.linalg.norm(curve.derivative()(np.linspace(0, 1, 1001)), axis=1)
     return {
         "ends_method": ends.method,
         "inlet": _end_report(inlet),
@@ -233,12 +276,57 @@ def _build_report(
         "path_voxels": int(len(path)),
         "L": int(len(curve.t) - 2 * (curve.k + 1)),
         "centerline_length_mm": vcs.length,
-        "arc_length_speed_deviation": float(np.ptp(speed) / speed.mean()),
-        "centerline_min_wall_distance_mm": float(wall_d.min()),
-        "centerline_inside_lumen": bool(wall_d.min() > 0),
+        "arc_length_speed_deviation": speed_deviation(curve),
         "v1_0_from": vcs.v1_0_from,
         "recentre_max_shift_mm": [float(v) for v in shifts],
         "timings_s": timings,
+    }
+
+
+def _centerline_checks(
+    curve: BSpline, reference: BSpline, lumen: VoxelLumen, wall_tris: NDArray[np.floating]
+) -> dict[str, float | bool]:
+    """Where the centerline is closest to the wall (fit_report.json keys).
+
+    The distance d to the wall along c(tau) (tau in [0.005, 0.995], 991 samples) from the voxel
+    distance field; at the 8 samples where it is smallest, the exact point-to-triangle distance
+    to the wall (:func:`vcs.mesh.point_triangle_distance`) replaces it. The ratio compares d with
+    the lumen radius there (d at the nearest point of the re-centred ``reference`` curve).
+
+    Parameters
+    ----------
+    curve, reference : BSpline
+        The centerline and the re-centred working curve, mm.
+    lumen : VoxelLumen
+        The voxelised lumen and its distance field.
+    wall_tris : (M, 3, 3) float, mm
+        Wall triangles.
+
+    Returns
+    -------
+    dict
+        ``centerline_min_wall_distance_mm`` (0 where the curve is outside the lumen),
+        ``centerline_min_wall_distance_ratio`` (dimensionless), ``centerline_inside_lumen``.
+    """
+    from scipy.spatial import cKDTree
+
+    tau = np.linspace(0.005, 0.995, 991)
+    c = curve(tau)
+    d = lumen.distance_at(c)
+    inside = d > 0
+    worst = np.argsort(d)[:8]
+    d[worst] = np.where(inside[worst], point_triangle_distance(c[worst], wall_tris), 0.0)
+    ref = reference(np.linspace(0.0, 1.0, 2001))
+    ref_d = np.maximum(lumen.distance_at(ref), lumen.h)
+    tree = cKDTree(ref)
+    # the margin away from the ends (where the curve is pinned to the end centres)
+    tau_i = interior_samples(ref_d[[0, -1]], curve_length(reference))
+    c_i = curve(tau_i)
+    ratio = lumen.distance_at(c_i) / ref_d[tree.query(c_i)[1]]
+    return {
+        "centerline_min_wall_distance_mm": float(d.min()),
+        "centerline_min_wall_distance_ratio": float(ratio.min()),
+        "centerline_inside_lumen": bool(inside.all() and d.min() > 0),
     }
 
 

@@ -53,6 +53,27 @@ def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
     return np.concatenate([t1, t2])
 
 
+def _ring_cap(
+    ring: NDArray[np.floating], center: NDArray[np.floating], spacing: float, r_max: float, offset: tuple[int, int]
+) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
+    """Cap of a star-shaped section that Delaunay cannot close (non-convex boundary): copies of the
+    boundary ring scaled towards ``center`` (nested, so never crossing), joined by quads, and a
+    fan around the centre. Same return convention as :func:`_cap`."""
+    n = len(ring)
+    m = max(2, int(round(r_max / spacing)))
+    scales = 1.0 - np.arange(1, m) / m
+    inner = center + scales[:, None, None] * (ring - center)[None]  # (m - 1, n, 3)
+    verts = np.vstack([inner.reshape(-1, 3), center[None]])
+    ids = np.vstack([offset[0] + np.arange(n)[None], offset[1] + np.arange((m - 1) * n).reshape(m - 1, n)])
+    faces = []
+    for a, b in zip(ids[:-1], ids[1:]):
+        a2, b2 = np.roll(a, -1), np.roll(b, -1)
+        faces += [np.column_stack([a, a2, b2]), np.column_stack([a, b2, b])]
+    last, c = ids[-1], offset[1] + (m - 1) * n
+    faces.append(np.column_stack([last, np.roll(last, -1), np.full(n, c)]))
+    return verts, np.concatenate(faces)
+
+
 def _cap(
     ring: NDArray[np.floating], center: NDArray[np.floating], normal: NDArray[np.floating], offset: tuple[int, int]
 ) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
@@ -92,8 +113,8 @@ def _cap(
     bedges = {tuple(sorted((k, (k + 1) % n))) for k in range(n)}
     e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
     present = {tuple(x) for x in e.tolist()}
-    if not bedges <= present:
-        raise VCSInputError("could not triangulate a flat cap of the wall; increase --n-theta or check the model")
+    if not bedges <= present:  # a non-convex section (e.g. the sinus lobes of a root): nested rings
+        return _ring_cap(ring, center, spacing, r_max, offset)
     verts3 = center + lat[:, :1] * e1 + lat[:, 1:] * e2
     idx = np.where(tri < n, tri + offset[0], tri - n + offset[1])
     return verts3, idx

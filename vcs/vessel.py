@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vcs.ends import find_ends
+from vcs.ends import find_ends, parse_end_option
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
 from vcs.mesh import connected_faces, triangle_areas
@@ -106,6 +106,47 @@ class VesselModel:
         if template.wall is not None:
             wall = template.wall.with_coefficients(a[n_c:].reshape(template.wall.coefficients.shape))
         return cls(vcs, wall, template.units, dict(template.meta))
+
+    @property
+    def n_knots(self) -> int:
+        """L, the centerline's number of uniform interior knots."""
+        return int(len(self.vcs.curve.t) - 2 * (self.vcs.curve.k + 1))
+
+    def with_n_knots(self, L: int) -> VesselModel:
+        """The same vessel with its centerline refitted with ``L`` knots (the wall model is kept).
+
+        An atlas needs one L for every patient (paper Section 2.3.1: one feature vector layout).
+        The curve is refitted by least squares to 4,001 of its own points equally spaced in tau
+        (= arc length), with the same end points and end tangents, and re-parametrised by arc
+        length (:func:`vcs.centerline.fit_centerline`, Eq. 1); v1(0) is transported onto the new
+        t(0). Raising L moves c(tau) by < 0.1 mm (0.06 mm on aorta phantom 1), so (tau, theta,
+        rho) and rho_w(tau, theta) keep their meaning.
+
+        Parameters
+        ----------
+        L : int
+            New number of interior knots (>= 1).
+
+        Returns
+        -------
+        VesselModel
+            ``meta`` records the original L as ``L_fitted``.
+        """
+        from vcs.centerline import fit_centerline
+
+        if L == self.n_knots:
+            return self
+        c = self.vcs.curve
+        tau = np.linspace(0.0, 1.0, 4001)
+        d = c.derivative()(np.array([0.0, 1.0]))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        curve = fit_centerline(c(tau), int(L), end_directions=(d[0], d[1]))
+        t0 = curve.derivative()(0.0)
+        t0 = t0 / np.linalg.norm(t0)
+        v = self.vcs.v1_0 - (self.vcs.v1_0 @ t0) * t0
+        vcs = VesselCoordinateSystem(curve, v / np.linalg.norm(v), v1_0_from=self.vcs.v1_0_from)
+        meta = {**self.meta, "L": int(L), "L_fitted": int(self.meta.get("L_fitted", self.n_knots))}
+        return VesselModel(vcs, self.wall, self.units, meta)
 
     # -- geometry -----------------------------------------------------------------------------
     def fitted_wall(self) -> WallModel:
@@ -293,6 +334,7 @@ def largest_component(surf: Surface) -> Surface:
         surf.units_source,
         surf.path,
         (*surf.warnings, msg),
+        surf.units_evidence,
     )
 
 
@@ -338,7 +380,7 @@ def fit_vessel(
     inlet_cap: Path | str | None = None,
     outlet_cap: Path | str | None = None,
     cap_array: str | None = "auto",
-    L: int = 9,
+    L: int | str = "auto",
     K: int | None = 19,
     R: int | None = 15,
     recentre_iterations: int = 3,
@@ -355,14 +397,16 @@ def fit_vessel(
     units : {"auto", "mm", "cm", "m"}
         Units of the file (ignored for a :class:`Surface`).
     inlet, outlet : str, array-like of 3 floats, or None
-        End points in the mesh's units (``'x,y,z'`` strings or arrays), see
-        :func:`vcs.ends.find_ends`.
+        End points in the mesh's units (``'x,y,z'`` strings or arrays), or ends listed by
+        :func:`vcs.ends.list_ends` (``'end:N'``, ``'NAME=VALUE'``); see :func:`vcs.ends.find_ends`.
     inlet_cap, outlet_cap : Path, str or None
         Cap surface files, in the mesh's units; give both or neither.
     cap_array : str or None
         Cell array labelling the caps; ``"auto"`` tries the usual names, None disables.
-    L : int
-        Interior knots of the centerline c(tau).
+    L : int or "auto"
+        Interior knots of the centerline c(tau); "auto" (default) picks the smallest L >= 9 that
+        keeps the curve inside the lumen with a margin and tau the arc length within 2 %
+        (:func:`vcs.centerline.choose_n_knots`).
     K, R : int or None
         Interior knots of the wall model in tau and theta; None for no wall model.
     recentre_iterations : int
@@ -381,9 +425,9 @@ def fit_vessel(
     surf = mesh if isinstance(mesh, Surface) else read_surface(mesh, units)
     surf = largest_component(surf)
     s = surf.scale_to_mm
-    p_in = parse_point(inlet, "inlet")
-    p_out = parse_point(outlet, "outlet")
-    if p_in is not None and p_out is not None and np.linalg.norm((p_in - p_out) * s) < 1.0:
+    p_in = parse_end_option(inlet, "inlet")
+    p_out = parse_end_option(outlet, "outlet")
+    if isinstance(p_in, np.ndarray) and isinstance(p_out, np.ndarray) and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
     caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
     for cap in (inlet_cap, outlet_cap):
@@ -396,11 +440,13 @@ def fit_vessel(
         surf.vertices,
         surf.faces,
         surf.cell_data,
-        inlet=None if p_in is None else p_in * s,
-        outlet=None if p_out is None else p_out * s,
+        inlet=p_in * s if isinstance(p_in, np.ndarray) else p_in,
+        outlet=p_out * s if isinstance(p_out, np.ndarray) else p_out,
         inlet_cap=caps[0],
         outlet_cap=caps[1],
         cap_array=cap_array,
+        lumen_radius=surf.lumen_radius_mm,
+        units=surf.units,
     )
     t_read = time.perf_counter()
     vcs = VesselCoordinateSystem.from_surface(
@@ -426,17 +472,25 @@ def fit_vessel(
                 f"{n_out} wall points ({100 * n_out / wr['n_wall_points']:.1f}%) are outside Omega "
                 "(lumen radius above the centerline's radius of curvature, or closest point not unique)"
             )
+    if vcs.report.get("L_auto", {}).get("criteria_met") is False:
+        warnings.append(
+            f"--L auto: no L up to {vcs.report['L_working']} keeps |c'| within 2 % inside the lumen; "
+            f"took L = {vcs.report['L']} (deviation {100 * vcs.report['arc_length_speed_deviation']:.1f} %)"
+        )
     report = {
         "warnings": warnings,
         "mesh": str(surf.path),
         "units": surf.units,
         "units_source": surf.units_source,
+        "units_evidence": surf.units_evidence,
         "n_vertices": int(len(surf.vertices)),
         "n_triangles": int(len(surf.faces)),
         **vcs.report,
     }
     if wall_fit is not None:
         report.update(wall_fit.report)
+        report.update(wall_quality(wall_fit))
+    report.update(fit_quality(report))
     report["timings_s"] = {
         "read_and_ends": t_read - t0,
         **vcs.report["timings_s"],
@@ -449,7 +503,133 @@ def fit_vessel(
         "ends_method": ends.method,
         "inlet_center_mm": report["inlet"]["center_mm"],
         "outlet_center_mm": report["outlet"]["center_mm"],
-        "L": int(L),
+        "L": int(report["L"]),
+        "L_source": report["L_source"],
+        "quality": report["quality"],
+        "quality_reasons": report["quality_reasons"],
     }
     model = VesselModel(vcs, None if wall_fit is None else wall_fit.model, surf.units, meta)
     return model, report, wall_fit
+
+
+#: Limits of :func:`fit_quality` (dimensionless): beyond any of them a fit is ``poor``.
+QUALITY_LIMITS = {
+    "max_arc_length_speed_deviation": 0.05,
+    "min_centerline_wall_distance_ratio": 0.25,
+    "min_model_radius_ratio": 0.5,
+    "min_fraction_points_used": 0.25,
+    "min_fraction_points_used_of_vessel": 0.9,
+    "max_residual_p95_ratio": 0.1,
+}
+
+
+def wall_quality(wall_fit: WallFit, n_tau: int = 201, n_theta: int = 64) -> dict[str, Any]:
+    """Checks of a fitted wall model rho_w against the wall it was fitted to (fit_report.json keys).
+
+    Parameters
+    ----------
+    wall_fit : WallFit
+        From :func:`vcs.wall.fit_wall` (mm).
+    n_tau, n_theta : int
+        Grid on which rho_w (Eq. 5) is evaluated.
+
+    Returns
+    -------
+    dict
+        ``model_radius_min_mm`` (min of rho_w on the grid), ``model_radius_min_ratio`` (the
+        smallest ratio, over tau, of min_theta rho_w to the median radius of the wall points used
+        around that tau; dimensionless), ``model_radius_min_tau``, ``residual_p95_mm``,
+        ``median_radius_mm``, ``fraction_points_used`` (of the wall points between the end planes),
+        ``fraction_points_used_of_vessel`` (the same without the points on side branches and
+        those where the wall is not star-convex about the centerline, separate reasons).
+    """
+    tau = np.linspace(0.0, 1.0, n_tau)
+    rho_w = wall_fit.model(tau[:, None], np.linspace(0.0, 2 * np.pi, n_theta, endpoint=False)[None, :])
+    used = wall_fit.used
+    n_bins = 40
+    b = np.minimum((wall_fit.tau[used] * n_bins).astype(int), n_bins - 1)
+    from vcs.centerline import group_median
+
+    med = group_median(b, wall_fit.rho[used], n_bins)
+    has = np.bincount(b, minlength=n_bins) > 0
+    centres = (np.arange(n_bins) + 0.5) / n_bins
+    local = np.interp(tau, centres[has], med[has]) if has.any() else np.full(n_tau, np.nan)
+    ratio = rho_w.min(axis=1) / np.maximum(local, 1e-9)
+    i = int(np.nanargmin(ratio)) if np.isfinite(ratio).any() else 0
+    r = wall_fit.report
+    n_between = r["n_wall_points"] - r["points_not_used"]["beyond_end_planes"]
+    n_vessel = n_between - r["points_not_used"]["branch"] - r["points_not_used"]["not_first_crossing"]
+    res = wall_fit.residual[used]
+    return {
+        "model_radius_min_mm": float(rho_w.min()),
+        "model_radius_min_ratio": float(ratio[i]),
+        "model_radius_min_tau": float(tau[i]),
+        "median_radius_mm": float(np.median(wall_fit.rho[used])) if used.any() else None,
+        "residual_p95_mm": float(np.percentile(res, 95)) if res.size else None,
+        "fraction_points_used": r["n_points_used"] / max(n_between, 1),
+        "fraction_points_used_of_vessel": r["n_points_used"] / max(n_vessel, 1),
+    }
+
+
+def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) -> dict[str, Any]:
+    """``quality`` (``ok`` or ``poor``) and ``quality_reasons`` (one line each) of a fit report.
+
+    A fit is poor when the centerline leaves the lumen or comes within a quarter of the local
+    lumen radius of the wall, when tau is not the arc length of paper Section 2.2.1 (|c'| varies
+    by more than 5 %), when the wall model rho_w (Eq. 5) reaches zero or falls below half the
+    local lumen radius, when less than a quarter of the wall points between the end planes, or
+    less than 90 % of those not on side branches, were used, or when the 95th percentile of the
+    residuals (Eq. 11) exceeds 10 % of the median radius (:data:`QUALITY_LIMITS`).
+
+    Parameters
+    ----------
+    report : dict
+        The fit report so far (the keys of :meth:`VesselCoordinateSystem.from_surface`'s report
+        and, with a wall model, of :func:`vcs.wall.fit_wall` and :func:`wall_quality`).
+    limits : dict or None
+        Overrides of :data:`QUALITY_LIMITS`.
+
+    Returns
+    -------
+    dict
+        ``quality`` and ``quality_reasons`` (list of str).
+    """
+    lim = {**QUALITY_LIMITS, **(limits or {})}
+    why: list[str] = []
+    d = report["centerline_min_wall_distance_mm"]
+    if not report["centerline_inside_lumen"]:
+        why.append(f"the centerline leaves the lumen (minimum wall distance {d:.3f} mm); use more knots (--L auto)")
+    elif report["centerline_min_wall_distance_ratio"] < lim["min_centerline_wall_distance_ratio"]:
+        pct = 100 * report["centerline_min_wall_distance_ratio"]
+        why.append(
+            f"the centerline touches the wall: it comes within {pct:.0f} % of the local lumen radius of it "
+            f"(minimum wall distance {d:.3f} mm)"
+        )
+    dev = report["arc_length_speed_deviation"]
+    if dev > lim["max_arc_length_speed_deviation"]:
+        why.append(f"tau is not the arc length: |c'| varies by {100 * dev:.1f} % (> 5 %); use more knots (--L auto)")
+    if "model_radius_min_mm" in report:
+        if report["model_radius_min_mm"] <= 0:
+            why.append(
+                f"the model radius reaches {report['model_radius_min_mm']:.2f} mm (<= 0) near tau = "
+                f"{report['model_radius_min_tau']:.2f}"
+            )
+        elif report["model_radius_min_ratio"] < lim["min_model_radius_ratio"]:
+            why.append(
+                f"the model radius falls to {100 * report['model_radius_min_ratio']:.0f} % of the lumen radius "
+                f"near tau = {report['model_radius_min_tau']:.2f}"
+            )
+        if report["fraction_points_used"] < lim["min_fraction_points_used"]:
+            why.append(
+                f"only {100 * report['fraction_points_used']:.0f} % of the wall points between the end planes "
+                f"were used ({report['points_not_used']})"
+            )
+        elif report["fraction_points_used_of_vessel"] < lim["min_fraction_points_used_of_vessel"]:
+            why.append(
+                f"only {100 * report['fraction_points_used_of_vessel']:.0f} % of the star-convex wall points "
+                f"off side branches were used ({report['points_not_used']})"
+            )
+        p95, r_med = report.get("residual_p95_mm"), report.get("median_radius_mm")
+        if p95 is not None and r_med and p95 > lim["max_residual_p95_ratio"] * r_med:
+            why.append(f"residual p95 {p95:.2f} mm is above 10 % of the median radius ({r_med:.1f} mm)")
+    return {"quality": "poor" if why else "ok", "quality_reasons": why}

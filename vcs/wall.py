@@ -324,6 +324,7 @@ def fit_wall(
     R: int = 15,
     smoothing: float = 1e-5,
     branch_rel: float = 0.12,
+    reach_rel: float = 0.5,
     grow_rel: float = 0.3,
     orientation: float | None = None,
 ) -> WallFit:
@@ -331,10 +332,12 @@ def fit_wall(
 
     Vertices are left out, and counted by reason, when they lie beyond an end plane, outside
     Omega, when the ray from c(tau) does not reach them first (their outward normal faces the
-    centerline: the wall is not star-convex there), or on a side branch (rho above the fit by more
-    than ``branch_rel`` of the local radius, or above the median radius of their tau ring by more
-    than 2.5 ``branch_rel``; such regions are grown by ``grow_rel`` times the median vessel radius,
-    to take the flare of the ostium too).
+    centerline: the wall is not star-convex there), or on a side branch: a connected region of
+    vertices with rho above the fit by more than ``branch_rel`` of the local radius, or above the
+    median radius of their tau ring by more than 2.5 ``branch_rel``, of which some vertex reaches
+    more than ``reach_rel`` of the local radius out of the tube (hysteresis: bumps and oval
+    sections never do); such regions are grown by ``grow_rel`` times the median vessel radius,
+    to take the flare of the ostium too, and take the vertices outside Omega that they touch.
 
     Parameters
     ----------
@@ -352,6 +355,9 @@ def fit_wall(
         Relative second-difference penalty, see :func:`lsq_wall`.
     branch_rel : float
         Side-branch threshold, as a fraction of the local radius (dimensionless).
+    reach_rel : float
+        A branch region must reach rho > (1 + ``reach_rel``) times the local radius somewhere
+        (dimensionless).
     grow_rel : float
         Growth of the side-branch regions, in median vessel radii (dimensionless).
     orientation : float or None
@@ -426,23 +432,36 @@ def fit_wall(
         ok = np.isfinite(med)
         return np.interp(np.arange(n_bins), np.flatnonzero(ok), med[ok]) if ok.any() else med
 
+    anchors = _end_sections(vcs, vertices, faces, float(np.nanmedian(rho[reason == 0])))
+    w_anchor = float(np.median(w[reason == 0]))
+
     def fit() -> WallModel:
         """LSQ on the kept wall; where branches were cut out, the ring's median radius stands in
-        (so the gap is filled like the wall around it instead of by unconstrained spline)."""
+        (so the gap is filled like the wall around it instead of by unconstrained spline); the
+        wall's cuts by the two end planes pin rho_w at tau = 0 and 1 (no extrapolation there)."""
         sel, fill = reason == 0, reason == 4
-        t_ = np.concatenate([tau[sel], tau[fill]])
-        a_ = np.concatenate([theta[sel], theta[fill]])
-        r_ = np.concatenate([rho[sel], ring_median()[b[fill]]])
-        return lsq_wall(t_, a_, r_, np.concatenate([w[sel], w[fill]]), K, R, smoothing)
+        t_ = np.concatenate([tau[sel], tau[fill], anchors[0]])
+        a_ = np.concatenate([theta[sel], theta[fill], anchors[1]])
+        r_ = np.concatenate([rho[sel], ring_median()[b[fill]], anchors[2]])
+        w_ = np.concatenate([w[sel], w[fill], np.full(len(anchors[0]), w_anchor)])
+        return lsq_wall(t_, a_, r_, w_, K, R, smoothing)
 
     model: WallModel  # assigned by the first pass of the loop
     for _ in range(6):
         model = fit()
         cand = (reason == 0) | (reason == 4)
         pred = model(np.nan_to_num(tau), np.nan_to_num(theta))
-        # seeds: far above the fit, or far above the median radius of their tau ring (the fit
-        # itself bends toward wide ostia, the ring median does not)
-        out = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * ring_median()[b]))
+        # candidates: far above the fit, or far above the median radius of their tau ring (the
+        # fit itself bends toward wide ostia, the ring median does not); a branch is a connected
+        # region of candidates that reaches well out of the tube somewhere (hysteresis): bumps,
+        # oval sections and a badly fitted stretch stay below ``reach_rel`` and are kept
+        med = ring_median()[b]
+        weak = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * med))
+        # a stub reaching past the centre of curvature is outside Omega: it links and seeds too
+        far_out = (reason == 2) & (rho > (1.0 + 2.5 * branch_rel) * med)
+        linked = weak | far_out
+        strong = linked & (rho > (1.0 + reach_rel) * np.where(cand, np.minimum(pred, med), med))
+        out = _regions_with_seeds(adj, linked, strong) & cand
         grown = out.copy()
         for _ in range(n_grow):
             grown = grown | (adj @ grown.astype(float) > 0)
@@ -451,6 +470,11 @@ def fit_wall(
             break
         reason[cand] = 0
         reason[new_branch] = 4
+    # points outside Omega that touch a branch region (stubs reaching past the centre of
+    # curvature, a branch beyond the reach of the curve) belong to that branch
+    if (reason == 4).any() and (reason == 2).any():
+        far_out = (reason == 2) & (rho > (1.0 + 2.5 * branch_rel) * ring_median()[b])
+        reason[_regions_with_seeds(adj, far_out | (reason == 4), reason == 4) & far_out] = 4
     sel = reason == 0
     if (reason == 4).any():
         model = fit()
@@ -475,3 +499,75 @@ def fit_wall(
     return WallFit(
         model, vertices[keep], tau[keep], theta[keep], rho[keep], residual[keep], sel[keep], reason[keep], report
     )
+
+
+def _regions_with_seeds(
+    adj: sparse.csr_matrix, member: NDArray[np.bool_], seed: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """Vertices of the connected regions of ``member`` (over the mesh edges) that contain a ``seed``.
+
+    Parameters
+    ----------
+    adj : (N, N) sparse
+        Vertex adjacency of the mesh.
+    member : (N,) bool
+        Vertices that may belong to a region.
+    seed : (N,) bool
+        Vertices that make their region count (only those inside ``member`` do).
+
+    Returns
+    -------
+    (N,) bool
+    """
+    idx = np.flatnonzero(member)
+    out = np.zeros(len(member), bool)
+    if len(idx) == 0 or not (seed & member).any():
+        return out
+    from scipy.sparse import csgraph
+
+    _, lab = csgraph.connected_components(adj[idx][:, idx], directed=False)
+    keep = np.zeros(lab.max() + 1, bool)
+    keep[lab[seed[idx]]] = True
+    out[idx[keep[lab]]] = True
+    return out
+
+
+def _end_sections(
+    vcs: VesselCoordinateSystem, vertices: NDArray[np.floating], faces: NDArray[np.integer], radius: float
+) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]:
+    """(tau, theta, rho) of the wall's cuts by the two end planes (paper Section 2.2.1 end planes).
+
+    The wall edges crossing the plane through c(0) (c(1)) normal to t(0) (t(1)), within 2.5
+    ``radius`` of it, give points at tau = 0 (1) of known theta and rho: data for rho_w where
+    the wall vertices themselves stop short of the end plane (a cut closed surface, a coarse mesh).
+
+    Parameters
+    ----------
+    vcs : VesselCoordinateSystem
+    vertices : (N, 3) float, mm
+    faces : (M, 3) int
+        Wall triangles.
+    radius : float, mm
+        Typical lumen radius (search radius around the end centres).
+
+    Returns
+    -------
+    tau, theta, rho : (n,) float
+        theta in rad, rho in mm.
+    """
+    out: list[list[float]] = [[], [], []]
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    for t_end in (0.0, 1.0):
+        t, v1, v2 = (a[0] for a in vcs.frame(np.array([t_end])))
+        c = vcs.curve(t_end)
+        sd = (vertices - c) @ t
+        a, bb = sd[e[:, 0]], sd[e[:, 1]]
+        cross = a * bb < 0
+        wgt = (a[cross] / (a[cross] - bb[cross]))[:, None]
+        x = vertices[e[cross, 0]] + wgt * (vertices[e[cross, 1]] - vertices[e[cross, 0]]) - c
+        x = x[np.linalg.norm(x, axis=1) < 2.5 * radius]
+        out[0].extend([t_end] * len(x))
+        out[1].extend(np.mod(np.arctan2(x @ v2, x @ v1), TWO_PI))
+        out[2].extend(np.linalg.norm(x, axis=1))
+    return np.array(out[0]), np.array(out[1]), np.array(out[2])

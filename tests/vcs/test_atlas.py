@@ -12,6 +12,7 @@ from vcs.atlas import (
     PCA,
     RigidTransform,
     align_models,
+    atlas_summary,
     build_atlas,
     compute_atlas,
     generalized_procrustes,
@@ -223,7 +224,8 @@ def aorta_cohort():
         m, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", f"aorta{seed}"))
         models.append(m)
         diameters.append(ph.params["ascending_diameter_mm"])
-    aligned, _, _ = align_models(models)
+    L = max(m.n_knots for m in models)  # --L auto per vessel: one L for the cohort (as compute_atlas)
+    aligned, _, _ = align_models([m.with_n_knots(L) for m in models])
     return aligned, np.array(diameters)
 
 
@@ -231,8 +233,9 @@ def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
     """The generator's dominant parameter is recovered by the first shape mode.
 
     Measured (seeds 0-7, resolution 3, no aneurysm): |r| = 0.98 for the wall block's first mode,
-    0.93 for the paper's joint (centerline + wall) PCA (the generator's lengths follow the
-    diameter allometrically; with random aneurysms the joint |r| drops to 0.88).
+    0.88 for the paper's joint (centerline + wall) PCA with the cohort's L (the largest --L auto of
+    the 8; 0.93 with the paper's L = 9: more centerline control points carry more of the arch's
+    variation, which the generator draws independently of the diameter).
     """
     aligned, d = aorta_cohort
     wall = PCA.from_data(shape_matrix(aligned, "wall"), 3)
@@ -240,7 +243,7 @@ def test_phantom_cohort_first_mode_is_the_ascending_diameter(aorta_cohort):
     r_wall = abs(np.corrcoef(wall.scores[:, 0], d)[0, 1])
     r_joint = abs(np.corrcoef(joint.scores[:, 0], d)[0, 1])
     assert r_wall >= 0.9, r_wall
-    assert r_joint >= 0.9, r_joint
+    assert r_joint >= 0.85, r_joint
     # projection of a cohort member: its own scores, reconstruction error ~ 0 with all modes
     full = PCA.from_data(shape_matrix(aligned, "all"))
     s, _, err = full.project(aligned[3].feature_vector())
@@ -268,6 +271,13 @@ def test_sinuses_of_valsalva_visible_in_the_mean_shape(aorta_cohort, tmp_path):
     assert lobes(0.5) < 0.005
     mean_shape_png(mean, tmp_path / "mean.png")
     assert (tmp_path / "mean.png").stat().st_size > 20_000
+    # the figure calls it a root because it shows the sinus lobes (a tube's says inlet)
+    from vcs.atlas.plots import _plt, mean_shape_figure
+
+    fig = mean_shape_figure(mean)
+    titles = " | ".join(ax.get_title() for ax in fig.axes)
+    _plt().close(fig)
+    assert "near the inlet: an aortic root" in titles and "three sinus lobes" in titles, titles
 
 
 def test_project_model_recovers_scores_of_a_moved_member():
@@ -281,3 +291,216 @@ def test_project_model_recovers_scores_of_a_moved_member():
     assert r["error"] < 1e-3 * np.linalg.norm(atlas.shape.sigma)  # 3 of 4 modes kept: nearly exact
     assert status_exclusion({"converged": False, "converged_relaxed": True}, accept_relaxed=True) is None
     assert status_exclusion({"converged": False, "converged_relaxed": True}) is not None
+
+
+# ------------------------------------------------------------------ an honest atlas (issue #11, item 4)
+def test_patient_exclusion_takes_the_first_reason_and_its_stage():
+    from vcs.atlas.cohort import patient_exclusion, status_stage
+
+    ok_fields = {"U": np.zeros(3)}
+    fit_failed = {"failed": True, "stage": "fit", "reason": "fit failed: 'x.stl' contains no surface triangles"}
+    wall_failed = {"converged": False, "failed": True, "stage": "wall", "reason": "wall failed: rho_w < 0"}
+    assert patient_exclusion(fit_failed, wall_failed, None) == ("fit", fit_failed["reason"])
+    assert patient_exclusion({"units": "mm"}, wall_failed, None) == ("wall", "wall failed: rho_w < 0")
+    mesh = {"converged": False, "reason": "snappyHexMesh failed: x", "failed_log": "/c/logs/log.snappyHexMesh"}
+    assert patient_exclusion({}, mesh, None) == ("mesh", "not converged: snappyHexMesh failed: x")
+    assert status_stage({"converged": False, "mesh_ok": False}) == "mesh"
+    solve = {"converged": False, "mesh_ok": True, "reason": "max iterations"}
+    assert patient_exclusion(None, solve, ok_fields) == ("solve", "not converged: max iterations")
+    sampled = {"excluded": np.array("sampling failed: ValueError: no cells"), "stage": np.array("sampling")}
+    assert patient_exclusion(None, {"converged": True}, sampled) == (
+        "sampling",
+        "sampling failed: ValueError: no cells",
+    )
+    assert patient_exclusion(None, {"converged": True}, None) == ("sampling", "no resampled fields")
+    assert patient_exclusion({"units": "mm"}, {"converged": True}, ok_fields) is None
+
+
+def _cohort(n: int, *, q_noise: float = 0.0, grid=(9, 8, 5), seed: int = 0):
+    rng = np.random.default_rng(seed)
+    radii = 8.0 + 4.0 * rng.random(n)
+    models = {
+        f"P{i}": transform_model(synthetic_model(radius=r, bend=50 + 3 * i), random_rigid(20 + i))
+        for i, r in enumerate(radii)
+    }
+    fields = {
+        pid: synthetic_fields(m, 0.5 + 0.01 * radii[i] ** 2 + q_noise * rng.normal(), n=grid)
+        for i, (pid, m) in enumerate(models.items())
+    }
+    return models, fields
+
+
+def test_failed_fit_without_a_model_is_listed_with_its_stage(tmp_path):
+    models, fields = _cohort(4)
+    reports = {pid: {"units": "mm"} for pid in models}
+    reports["P9"] = {"failed": True, "stage": "fit", "reason": "fit failed: mesh file 'p9.stl' is empty"}
+    statuses = {pid: {"converged": True} for pid in models}
+    statuses["P9"] = {"converged": False, "failed": True, "stage": "fit", "reason": reports["P9"]["reason"]}
+    build_atlas(models, fields, statuses, tmp_path, n_modes=2, reports=reports, figures=False)
+    s = json.loads((tmp_path / "atlas.json").read_text())
+    assert s["patients_included"] == ["P0", "P1", "P2", "P3"]
+    assert s["patients_excluded"] == [{"id": "P9", "stage": "fit", "reason": reports["P9"]["reason"]}]
+    # too few left: one line naming every excluded patient, its stage and reason
+    with pytest.raises(Exception, match=r"at least 3 included patients, got 2 \(excluded: P0 \(solve: not conv"):
+        compute_atlas(
+            models, fields, statuses | {"P0": {"converged": False, "reason": "x"}, "P1": None}, reports=reports
+        )
+
+
+def test_regression_flags_insufficient_patients_and_no_skill():
+    from vcs.atlas.regression import loo_sufficiency, r2_skill
+
+    assert loo_sufficiency(5, 3)[0] == "ok" and loo_sufficiency(4, 2)[0] == "insufficient_patients"
+    assert loo_sufficiency(6, 5) == (
+        "insufficient_patients",
+        "6 included patients: leave-one-out with k = 5 shape scores needs at least 7",
+    )
+    assert [r2_skill(v) for v in (-0.4, 0.0, 0.3, 0.8, float("nan"), None)] == [
+        "none",
+        "none",
+        "weak",
+        "good",
+        "undefined",
+        "undefined",
+    ]
+    # 4 patients: leave-one-out cannot say anything, whatever its numbers
+    small = atlas_summary(compute_atlas(*_cohort(4), {}, n_modes=2))["shape_to_flow_regression"]
+    assert small["status"] == "insufficient_patients" and small["n_patients"] == 4
+    assert "needs at least 5" in small["status_reason"]
+    assert all(v == "insufficient_patients" for sk in small["skill"].values() for v in sk)
+    # 8 patients whose flow is noise unrelated to the shape: R^2 <= 0 is reported as no skill
+    big = atlas_summary(compute_atlas(*_cohort(8, q_noise=0.5, seed=3), {}, n_modes=2))["shape_to_flow_regression"]
+    assert big["status"] == "ok"
+    pairs = [(r, k) for f in big["loo_r2"] for r, k in zip(big["loo_r2"][f], big["skill"][f])]
+    assert any(r is not None and r <= 0 for r, _ in pairs), pairs
+    for r, k in pairs:
+        assert k == ("undefined" if r is None else "none" if r <= 0 else "weak" if r < 0.5 else "good")
+
+
+def test_an_outlier_patient_does_not_set_the_colour_limits(tmp_path):
+    """One patient with a 19 m/s, 458 Pa spike in a few cells (as the measured cohort had): the
+    limits of every flow figure come from the 2nd-98th percentile of its three field panels,
+    shared by them, so the spike neither sets the colour bar nor darkens the other panels."""
+    models, fields = _cohort(6, grid=(24, 16, 6))
+    f = fields["P5"]
+    f["U_vcs"] = f["U_vcs"].copy()
+    f["U_vcs"][10:12, 2:4, 2:4, 0] = 19.0
+    f["p"] = f["p"].copy()
+    f["p"][10:12, 2:4, 2:4] = 458.0
+    build_atlas(models, fields, {}, tmp_path, n_modes=2)
+    s = json.loads((tmp_path / "atlas.json").read_text())
+    limits = s["colour_limits"]["limits"]
+    assert s["colour_limits"]["percentiles"] == [2.0, 98.0]
+    assert set(limits) == {f"flow_{f}_mode{k}" for f in ("U", "p", "WSS") for k in (1, 2)}
+    u_max = max(np.linalg.norm(fields[p]["U_vcs"], axis=-1).max() for p in fields if p != "P5")
+    p_max = max(fields[p]["p"].max() for p in fields if p != "P5")
+    for k in (1, 2):
+        assert limits[f"flow_U_mode{k}"][1] < 1.5 * u_max < 19.0, limits
+        assert limits[f"flow_p_mode{k}"][1] < 1.5 * p_max < 458.0, limits
+    # the spike is in the data: the plain min/max would have been set by it
+    atlas = compute_atlas(models, fields, {}, n_modes=2)
+    assert np.abs(atlas.flow["U"].mode_sample(0, 2.0)).max() > 2 * limits["flow_U_mode1"][1]
+
+
+def test_robust_limits_and_colour_bar_labels():
+    from vcs.atlas.plots import _CHAR_WIDTH, colour_bar_labels, robust_limits
+
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0.0, 1.0, 10_000)
+    b = a.copy()
+    b[:50] = 1e3  # 0.5 % outliers in one panel
+    lo, hi = robust_limits([a, b])
+    assert 0.0 <= lo < 0.03 and 0.97 < hi <= 1.0
+    assert robust_limits([np.full(5, 2.0)])[0] < 2.0 < robust_limits([np.full(5, 2.0)])[1]
+    assert robust_limits([np.array([np.nan])]) == (0.0, 1.0)
+    for lo, hi in ((0.0, 1.93), (-123.4, 458.2), (-12345.6, 45678.9), (1e-5, 3e-4), (0.0, 2.5e6)):
+        for width in (120.0, 336.0):
+            fmt, n = colour_bar_labels(lo, hi, width_px=width, font_px=14)
+            ticks = [fmt % t for t in np.linspace(lo, hi, n)]
+            assert len(set(ticks)) == n or n == 2, ticks  # distinct labels
+            if n > 2:  # no overlap: the widest label + 25 % fits the spacing
+                assert 1.25 * max(map(len, ticks)) * _CHAR_WIDTH * 14 <= width / (n - 1), (fmt, n, width)
+
+
+def test_flow_figure_has_one_clean_colour_bar_with_the_shared_limits():
+    """The pyvista objects of a flow figure (no pixels): one colour bar, titled with the field
+    and its unit only (no index), labels below the bar and the title above it (VTK draws a
+    horizontal bar's title over its middle label), every field panel on the same limits, the
+    mask panel without a bar."""
+    pv = pytest.importorskip("pyvista")
+    from vcs.atlas.plots import clipped_view_plotter
+
+    models, fields = _cohort(5, grid=(9, 8, 5))
+    atlas = compute_atlas(models, fields, {}, n_modes=2)
+    from vcs.grid import grid_points
+
+    mean = VesselModel.from_feature_vector(atlas.shape.mean, atlas.aligned_models[0])
+    pts, _ = grid_points(mean, atlas.grid["tau"], atlas.grid["theta"], atlas.grid["rho_n"])
+    p = atlas.flow["p"].mean.reshape(atlas.field_shapes["p"])
+    panels = [
+        ("p mean - 2 sigma", p * 0.5, "coolwarm"),
+        ("p mean", p, "coolwarm"),
+        ("p mean + 2 sigma", p * 2, "coolwarm"),
+    ]
+    panels.append(("p mode 1: top 20 % variation (red)", (p > p.mean()).astype(float), "Reds"))
+    try:  # skip only without any off-screen render window; errors of the figure code fail
+        probe = pv.Plotter(off_screen=True, window_size=[32, 32])
+        probe.add_mesh(pv.Sphere())
+        probe.screenshot(return_img=True)
+        probe.close()
+    except Exception as exc:  # noqa: BLE001
+        pytest.skip(f"no off-screen render window: {exc}")
+    pl = clipped_view_plotter(pts, atlas.grid["theta"], panels, label="p (Pa)", clim=(-12.5, 212.0))
+    try:
+        assert list(pl.scalar_bars.keys()) == ["p (Pa)"]
+        bar = pl.scalar_bars["p (Pa)"]
+        assert bar.GetTitle() == "" and bar.GetTextPosition() == bar.PrecedeScalarBar
+        assert pl.renderers[1].actors["colour_bar_title"].input == "p (Pa)"  # the middle field panel
+        assert bar.GetNumberOfLabels() >= 2 and bar.GetLabelFormat() in ("%.0f", "%.1f")
+        ranges = []
+        for i, ren in enumerate(pl.renderers):
+            for actor in ren.actors.values():
+                if isinstance(actor, pv.Actor) and actor.mapper is not None and actor.mapper.scalar_visibility:
+                    ranges.append((i, tuple(actor.mapper.scalar_range)))
+        assert ranges == [(0, (-12.5, 212.0)), (1, (-12.5, 212.0)), (2, (-12.5, 212.0)), (3, (0.0, 1.0))]
+        texts = [a.input for ren in pl.renderers for a in ren.actors.values() if isinstance(a, pv.Text)]
+        assert sorted(t for t in texts if t.startswith("p ")) == sorted([t for t, _, _ in panels] + ["p (Pa)"])
+    finally:
+        pl.close()
+
+
+def test_clipped_view_fallback_figure_shares_limits_and_one_colour_bar():
+    from vcs.atlas.plots import _plt, clipped_view_figure
+
+    th = 2 * np.pi * np.arange(8) / 8
+    a = np.linspace(0.0, 1.0, 9 * 8 * 5).reshape(9, 8, 5)
+    panels = [("U mean - 2 sigma", a, "viridis"), ("U mean", a, "viridis"), ("U mask", a > 0.5, "Reds")]
+    fig = clipped_view_figure(th, panels, label="|U| (m/s)", clim=(0.1, 0.9))
+    try:
+        images = [ax.images[0] for ax in fig.axes if ax.images]
+        assert [im.get_clim() for im in images] == [(0.1, 0.9), (0.1, 0.9), (0.0, 1.0)]
+        colour_bars = [ax for ax in fig.axes if not ax.images and ax.get_label() == "<colorbar>"]
+        assert len(colour_bars) == 1 and colour_bars[0].get_xlabel() == "|U| (m/s)"
+        assert len(colour_bars[0].get_xticks()) <= 6
+    finally:
+        _plt().close(fig)
+
+
+def test_mean_shape_title_says_inlet_for_a_tube_and_writes_each_figure_once(tmp_path):
+    from vcs.atlas.plots import _plt, mean_shape_figure, sinus_lobes
+
+    tube = synthetic_model(radius=10.0, ovality=0.5)
+    assert sinus_lobes(tube.fitted_wall()) < 0.005
+    fig = mean_shape_figure(tube)
+    titles = " | ".join(ax.get_title() for ax in fig.axes)
+    _plt().close(fig)
+    assert "near the inlet (tau 0-0.2)" in titles and "root" not in titles, titles
+    # one copy of each PNG, in figures/; atlas.json lists them relative to the atlas folder
+    models, fields = _cohort(4)
+    build_atlas(models, fields, {}, tmp_path, n_modes=2)
+    s = json.loads((tmp_path / "atlas.json").read_text())
+    assert not list(tmp_path.glob("*.png"))
+    pngs = sorted(p.name for p in (tmp_path / "figures").glob("*.png"))
+    listed = sorted(v.split("/", 1)[1] for v in s["files"].values() if v.endswith(".png"))
+    assert pngs == listed and "shape_mean.png" in pngs and "flow_p_mode1.png" in pngs
+    assert all(v.startswith("figures/") == v.endswith(".png") for v in s["files"].values())

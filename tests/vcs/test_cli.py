@@ -82,15 +82,23 @@ def test_bad_mesh_files_give_one_line(tmp_path, kind):
 
 
 def test_closed_surface_without_ends(tmp_path):
+    """A closed tube with two flat caps fits with no end given (the larger cap is the inlet), or
+    with points; a closed blob with no ends to find is one line asking for them."""
     import trimesh
 
     path = tmp_path / "closed.stl"
     trimesh.creation.cylinder(radius=10, height=100, sections=48).subdivide_to_size(2.0).export(path)
-    r = run("fit", path, "-o", tmp_path / "o", "--units", "mm")
-    assert r.returncode == 2 and "--inlet" in r.stderr and len(r.stderr.strip().splitlines()) == 1
-    # with the ends given as points it works
+    r = run("fit", path, "-o", tmp_path / "a", "--units", "mm")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((tmp_path / "a" / "fit_report.json").read_text())
+    assert rep["ends_method"] == "flat_caps" and abs(rep["centerline_length_mm"] - 100.0) < 0.5
     r = run("fit", path, "-o", tmp_path / "o", "--units", "mm", "--inlet", "0,0,49", "--outlet", "0,0,-49")
     assert r.returncode == 0, r.stderr
+    blob = tmp_path / "blob.stl"
+    trimesh.creation.icosphere(4, radius=10).export(blob)
+    r = run("fit", blob, "-o", tmp_path / "b", "--units", "mm")
+    assert r.returncode == 2 and "--inlet" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "b" / "model.json").exists()
 
 
 def test_three_openings_need_a_choice_and_points_outside(shared_data, tmp_path):
@@ -152,3 +160,22 @@ def test_inputs_are_never_overwritten(tube_stl, tmp_path):
     r = run("coords", tmp_path / "f" / "model.json", pts, "-o", pts)
     assert r.returncode == 2 and "also an input" in r.stderr
     assert pts.read_text() == "x,y,z\n0,0,30\n"
+
+
+def test_output_checks_of_grid_sensitivity_phantom(tube_stl, tmp_path):
+    """Bad -o for `vcs grid`, `vcs sensitivity` and `vcs phantom`: one line, exit 2, nothing written
+    (regressions: an internal error after the whole sweep; --params overwriting the STL)."""
+    run("fit", tube_stl, "-o", tmp_path / "f", "--units", "mm")
+    model = tmp_path / "f" / "model.json"
+    r = run("grid", model, "-o", tmp_path / "g.json")
+    assert r.returncode == 2 and "must end in .vtu" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "g.json").exists()
+    r = run("grid", model, "-o", model)
+    assert r.returncode == 2 and "also an input" in r.stderr
+    (tmp_path / "file").write_text("x")
+    r = run("sensitivity", tube_stl, "--L", "9:9:1", "--K", "7:7:1", "--R", "7:7:1", "-o", tmp_path / "file")
+    assert r.returncode == 2 and "not a directory" in r.stderr, r.stderr
+    assert (tmp_path / "file").read_text() == "x"
+    stl = tmp_path / "p.stl"
+    r = run("phantom", "--kind", "tube", "-o", stl, "--params", stl)
+    assert r.returncode == 2 and "--params" in r.stderr and not stl.exists()

@@ -160,3 +160,18 @@ def test_sensitivity_csv(tmp_path):
     lines = (tmp_path / "s" / "sensitivity.csv").read_text().splitlines()
     assert lines[0] == "L,K,R,residual_mean_mm,residual_p75_mm,n_meshes" and len(lines) == 1 + 4
     assert (tmp_path / "s" / "sensitivity.png").stat().st_size > 5000
+
+
+def test_non_convex_end_section_gets_a_closed_cap():
+    """Regression: with the end sections pinned to the wall's cut, the root inlet of an aorta
+    phantom has its three sinus lobes; Delaunay missed boundary edges of that non-convex cap
+    ('could not triangulate a flat cap') at n_theta = 32. The nested-ring cap closes it."""
+    from vcs.surface import check_closed
+
+    ph = make_phantom("aorta", seed=0, resolution=1.5)
+    model, _, _ = fit_vessel(Surface(ph.vertices, ph.faces, {}, "mm", "given", "aorta0"))
+    for n_theta in (32, 64):
+        w = wall_mesh(model, n_theta=n_theta, extend_outlet=1.0)
+        c = check_closed(w)
+        assert c["closed"], (n_theta, c)
+        assert c["volume_mm3"] == pytest.approx(signed_volume(w.vertices, w.faces), rel=1e-9)

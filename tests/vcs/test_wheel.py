@@ -12,6 +12,10 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
+# what a copy of the source tree leaves out (pip builds in the source folder, which must stay clean)
+_SKIP = shutil.ignore_patterns(
+    ".git", ".venv", "results", "build", "dist", "*.egg-info", "__pycache__", ".snakemake", "test-artifacts", ".*_cache"
+)
 
 
 @pytest.fixture(scope="module")
@@ -19,10 +23,7 @@ def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
     # build from a copy: pip builds in the source folder (build/, *.egg-info), which must stay clean
     src = out / "src"
-    skip = shutil.ignore_patterns(
-        ".git", ".venv", "results", "build", "*.egg-info", "__pycache__", ".snakemake", "test-artifacts", ".*_cache"
-    )
-    shutil.copytree(REPO, src, ignore=skip)
+    shutil.copytree(REPO, src, ignore=_SKIP)
     r = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", ".", "-w", str(out)],
         cwd=src,
@@ -33,6 +34,33 @@ def wheel(tmp_path_factory) -> Path:
     assert r.returncode == 0, r.stdout + r.stderr
     (whl,) = out.glob("vcs_atlas-*.whl")
     return whl
+
+
+def test_wheel_from_the_sdist_has_the_templates(tmp_path):
+    """The other install route: sdist (MANIFEST.in grafts templates/openfoam) -> wheel."""
+    src = tmp_path / "src"
+    shutil.copytree(REPO, src, ignore=_SKIP)
+    r = subprocess.run(
+        [sys.executable, "-c", "import setuptools.build_meta as b; print(b.build_sdist('sdist'))"],
+        cwd=src,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    (sdist,) = (src / "sdist").glob("*.tar.gz")
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(sdist), "-w", str(tmp_path / "w")],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    (whl,) = (tmp_path / "w").glob("vcs_atlas-*.whl")
+    names = zipfile.ZipFile(whl).namelist()
+    assert "vcs/cfd/templates/openfoam/common/system/snappyHexMeshDict" in names
+    assert "vcs/cfd/templates/openfoam/org10/constant/physicalProperties" in names
 
 
 def test_wheel_contains_templates_and_every_package(wheel):

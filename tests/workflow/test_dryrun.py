@@ -20,7 +20,7 @@ def chain(rules, ids=IDS):
     return {(r, i) for r in rules for i in ids}
 
 
-COHORT = {("atlas_build", None), ("all", None)}
+COHORT = {("atlas_build", None), ("atlas_complete", None), ("all", None)}
 
 
 def test_fresh_cohort_plans_every_stage_once_per_patient(cohort):
@@ -105,6 +105,14 @@ def test_adding_a_patient_runs_its_chain_and_the_atlas(cohort):
     assert cohort.planned_jobs() == chain(PER_PATIENT, ["P4"]) | COHORT
 
 
+def test_sheet_saved_with_a_utf8_bom_is_read(cohort):
+    """Excel's "UTF-8 CSV" starts the file with a byte-order mark: it is not part of the header."""
+    sheet = cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"}])
+    body = sheet.read_text().split("\n", 1)[1]  # no comment line: the BOM sits right before `id`
+    sheet.write_bytes(b"\xef\xbb\xbf" + body.encode())
+    assert cohort.planned_jobs() == chain(PER_PATIENT, ["P1"]) | COHORT
+
+
 def test_mesh_path_with_spaces_is_quoted(cohort):
     r = cohort.snakemake("-n", "-p", "--forcerun", "vcs_fit")
     fit_cmds = [
@@ -112,7 +120,50 @@ def test_mesh_path_with_spaces_is_quoted(cohort):
     ]
     p2 = [c for c in fit_cmds if "p 2 scan" in c]
     assert p2 and "'meshes/p 2 scan.stl'" in p2[0], fit_cmds
-    assert "--inlet 0,0,0 --outlet 0,0,100" in p2[0]
+    assert "--inlet=0,0,0 --outlet=0,0,100" in p2[0]
+
+
+def test_fit_runs_with_sheet_points_with_minus_signs_and_spaces(tmp_path, workdir_factory):
+    """Sheet points as scanners give them (negative, written with spaces) reach `vcs fit` as one
+    argument each that argparse cannot mistake for an option, and the fit itself runs (a torus
+    phantom moved to negative coordinates; the points pick its two open ends, outlet first)."""
+    import json
+
+    import numpy as np
+
+    from vcs.mesh import write_stl_binary
+    from vcs.phantoms.factory import make_phantom
+
+    ph = make_phantom("torus", resolution=2.5)
+    shift = np.array([-150.0, -75.5, -1200.0])
+    (tmp_path / "meshes").mkdir()
+    write_stl_binary(tmp_path / "meshes" / "neg torus.stl", ph.vertices + shift, ph.faces)
+    inlet = ", ".join(f"{v:.2f}" for v in ph.outlet_center + shift)  # "-190.00, -75.50, -1200.00"
+    outlet = " " + ",".join(f"{v:.2f}" for v in ph.inlet_center + shift)  # " -110.00,-75.50,-1200.00"
+    wd = workdir_factory(tmp_path, [{"id": "N1", "mesh": "meshes/neg torus.stl", "inlet": inlet, "outlet": outlet}])
+    r = wd.snakemake("-n", "-p", "results/patients/N1/fit/model.json")
+    assert "--inlet='-190.00, -75.50, -1200.00' --outlet=-110.00,-75.50,-1200.00" in r.stdout + r.stderr
+    wd.snakemake("-c1", "results/patients/N1/fit/model.json")
+    rep = json.loads((tmp_path / "results/patients/N1/fit/fit_report.json").read_text())
+    assert rep["units"] == "mm" and rep["ends_method"] == "open_loops"
+    assert np.linalg.norm(np.array(rep["inlet"]["center_mm"]) - (ph.outlet_center + shift)) < 0.5
+    assert np.linalg.norm(np.array(rep["outlet"]["center_mm"]) - (ph.inlet_center + shift)) < 0.5
+
+
+def test_sheet_ends_listed_by_vcs_ends_reach_the_fit(cohort):
+    """inlet/outlet cells may name ends of `vcs ends` (end:N, NAME=VALUE) instead of points."""
+    cohort.write_sheet(
+        [
+            {"id": "P1", "mesh": "meshes/p1.stl", "inlet": "end:2", "outlet": " end:0"},
+            {"id": "P2", "mesh": "meshes/p 2 scan.stl", "inlet": "ModelFaceID=3", "outlet": "ModelFaceID=-1"},
+            {"id": "P3", "mesh": "meshes/p3.stl", "inlet": "-1.5e1, -2, -3.25", "outlet": "-4,5,-6"},
+        ]
+    )
+    r = cohort.snakemake("-n", "-p", "--forcerun", "vcs_fit")
+    text = r.stdout + r.stderr
+    assert "--inlet=end:2 --outlet=end:0" in text
+    assert "--inlet=ModelFaceID=3 --outlet=ModelFaceID=-1" in text
+    assert "--inlet='-1.5e1, -2, -3.25' --outlet=-4,5,-6" in text
 
 
 def test_demo_rows_generate_their_phantoms(tmp_path, workdir_factory):
@@ -199,6 +250,13 @@ def test_ends_given_twice_fail_with_one_line(cohort):
 def test_half_given_ends_fail_with_one_line(cohort):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": "0,0,0"}])
     assert "both inlet and outlet" in _one_line_error(cohort)
+
+
+@pytest.mark.parametrize("bad", ["2", "end:", "1,2", "cap 3"])
+def test_malformed_sheet_end_fails_with_one_line(cohort, bad):
+    cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": bad, "outlet": "end:1"}])
+    msg = _one_line_error(cohort)
+    assert f"inlet '{bad}'" in msg and "x,y,z" in msg and "end:N" in msg
 
 
 def test_bad_config_value_fails_with_one_line(cohort):

@@ -635,3 +635,39 @@ def test_transient_fallback_never_raises(tmp_path, monkeypatch, fake):
     else:
         assert "wrote no time folder" in st["reason"]
     assert st["fields"]["time_averaged"] is False
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_diverged_simple_hands_over_to_the_transient(tmp_path, monkeypatch):
+    """SIMPLE's main stage dies of a floating point exception (a simpleFoam that fakes it after
+    the real start-up): the transient fallback starts from the start-up's state and its window is
+    judged; without the fallback the divergence is the reason."""
+    real = shutil.which("simpleFoam")
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    script = bindir / "simpleFoam"
+    script.write_text(
+        "#!/bin/bash\n"
+        "if grep -Eq '^endTime +20;' system/controlDict; then\n"  # the main stage (max_iterations 20)
+        '  echo "#0  Foam::error::printStack(Foam::Ostream&)"; echo "Floating point exception"; exit 136\n'
+        "fi\n"
+        f'exec "{real}" "$@"\n'
+    )
+    script.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bindir}:{os.environ['PATH']}")
+    stl = _jet_tube(tmp_path)
+    cfg = deep_merge(JET_CFG, {"solver": {"transient": {"flow_throughs": 0.1, "washout_flow_throughs": 0.05}}})
+    render_case(tmp_path / "c", stl, cfg, flavour="esi")
+    st = run_case(tmp_path / "c", ranks=1)
+    tr = st["transient"]
+    assert "simpleFoam (main) diverged: floating point exception" in tr["steady_not_converged"]
+    assert tr["started_from"] == "SIMPLE iteration 5" and tr["start_time"] == 5
+    assert tr["evaluated"] and st["criterion_used"] == "time_average_stationary"
+    assert st["converged"] is tr["stationary"]
+    assert st["reason"] is None if tr["stationary"] else "not stationary" in st["reason"]
+    assert "failed_log" not in st
+    render_case(tmp_path / "n", stl, deep_merge(cfg, {"solver": {"fallback": "none"}}), flavour="esi")
+    st = run_case(tmp_path / "n", ranks=1)
+    assert st["converged"] is False and "transient" not in st
+    assert st["reason"].startswith("simpleFoam (main) diverged") and st["failed_log"].endswith("log.simpleFoam")

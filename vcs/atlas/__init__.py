@@ -9,9 +9,11 @@ The pieces, each a plain function or a small frozen value object:
   of resampled flow fields (:func:`flow_vector`); :func:`mode_deformation` (paper Fig. 7);
   :func:`top_variation_mask`.
 * :mod:`vcs.atlas.regression`: :func:`ridge_loo` (beyond the paper), shape scores -> flow scores
-  ridge regression with leave-one-out cross-validated R^2.
-* :mod:`vcs.atlas.cohort`: :func:`status_exclusion`, :func:`compute_atlas` (the whole cohort
-  pipeline, arrays only), :func:`project_model`, :func:`atlas_summary`.
+  ridge regression with leave-one-out cross-validated R^2; :func:`loo_sufficiency` (too few
+  patients to say anything) and :func:`r2_skill` (``none`` for R^2 <= 0).
+* :mod:`vcs.atlas.cohort`: :func:`patient_exclusion` (stage and reason from the fit report,
+  :func:`status_exclusion`, the fields), :func:`compute_atlas` (the whole cohort pipeline, arrays
+  only), :func:`project_model`, :func:`atlas_summary`.
 * :mod:`vcs.atlas.build`: :func:`build_atlas` writes ``atlas.json``, ``atlas.npz`` and the figures.
 * :mod:`vcs.atlas.plots`: the figures and geometry files (pyvista, matplotlib).
 
@@ -21,7 +23,17 @@ the plotting module only when it writes figures.
 """
 
 from vcs.atlas.build import build_atlas
-from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas, project_model, status_exclusion
+from vcs.atlas.cohort import (
+    STAGES,
+    Atlas,
+    atlas_summary,
+    compute_atlas,
+    fit_exclusion,
+    patient_exclusion,
+    project_model,
+    status_exclusion,
+    status_stage,
+)
 from vcs.atlas.pca import (
     FLOW_FIELDS,
     PCA,
@@ -43,13 +55,14 @@ from vcs.atlas.procrustes import (
     wall_grid,
     wall_grid_points,
 )
-from vcs.atlas.regression import DEFAULT_ALPHAS, ridge_loo
+from vcs.atlas.regression import DEFAULT_ALPHAS, loo_sufficiency, r2_skill, ridge_loo
 
 __all__ = [
     "DEFAULT_ALPHAS",
     "FLOW_FIELDS",
     "PCA",
     "SHAPE_BLOCKS",
+    "STAGES",
     "TWO_PI",
     "VECTOR_FIELDS",
     "Atlas",
@@ -61,12 +74,17 @@ __all__ = [
     "compute_atlas",
     "flow_vector",
     "generalized_procrustes",
+    "loo_sufficiency",
     "mode_deformation",
+    "patient_exclusion",
     "procrustes",
     "project_model",
+    "r2_skill",
     "ridge_loo",
     "shape_matrix",
     "status_exclusion",
+    "status_stage",
+    "fit_exclusion",
     "top_variation_mask",
     "transform_model",
     "wall_grid",

@@ -31,13 +31,15 @@ def build_atlas(
     *,
     n_modes: int = 3,
     figures: bool = True,
+    figure_dir: str | Path | None = None,
     **options: Any,
 ) -> Atlas:
     """Compute the atlas (:func:`vcs.atlas.cohort.compute_atlas`) and write it to ``out_dir``.
 
-    Writes ``atlas.json`` (patients included/excluded with reasons, explained variances, scores,
-    regression R^2), ``atlas.npz`` (every PCA's mean, modes, sigma, scores; the field grid) and,
-    with ``figures``, the VTP/VTU/PNG files of :func:`vcs.atlas.plots.write_atlas_figures`.
+    Writes ``atlas.json`` (patients included/excluded with stages and reasons, explained
+    variances, scores, regression R^2 with its status and skill), ``atlas.npz`` (every PCA's mean,
+    modes, sigma, scores; the field grid) and, with ``figures``, the VTP/VTU files of
+    :func:`vcs.atlas.plots.write_atlas_figures` in ``out_dir`` and its PNGs in ``figure_dir``.
 
     Parameters
     ----------
@@ -50,9 +52,13 @@ def build_atlas(
     n_modes : int
         Modes kept per PCA.
     figures : bool
-        Also write the figures; atlas.json then lists them (``files``) and the 3-D ``renderer``.
+        Also write the figures; atlas.json then lists them (``files``, relative to ``out_dir``),
+        the 3-D ``renderer`` and the flow figures' ``colour_limits``.
+    figure_dir : str or Path, optional
+        Directory of the PNGs (default ``out_dir/figures``); each figure is written once.
     **options
-        Further keyword arguments of :func:`vcs.atlas.cohort.compute_atlas`.
+        Further keyword arguments of :func:`vcs.atlas.cohort.compute_atlas` (e.g. ``reports``,
+        the fit reports).
 
     Returns
     -------
@@ -76,10 +82,15 @@ def build_atlas(
     arrays.update({f"grid_{k}": v for k, v in atlas.grid.items()})
     np.savez_compressed(out / "atlas.npz", **arrays)
     if figures:
-        from vcs.atlas.plots import write_atlas_figures
+        from vcs.atlas.plots import COLOUR_PERCENTILES, write_atlas_figures
 
-        written = write_atlas_figures(atlas, out)
+        written = write_atlas_figures(atlas, out, png_dir=figure_dir)
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
+        summary["colour_limits"] = {
+            "percentiles": list(COLOUR_PERCENTILES),
+            "shared_by": "the mean - 2 sigma, mean and mean + 2 sigma panels of each flow figure",
+            "limits": written["colour_limits"],
+        }
     (out / "atlas.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
     log.info("atlas of %d patients (%d excluded) written to %s", len(atlas.patients), len(atlas.excluded), out)
     return atlas

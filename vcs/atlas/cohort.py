@@ -7,7 +7,7 @@ Pure numpy/scipy; never imports plotting (:mod:`vcs.atlas.plots`).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,28 +21,56 @@ from vcs.atlas.procrustes import (
     transform_model,
     wall_grid_points,
 )
-from vcs.atlas.regression import ridge_loo
+from vcs.atlas.regression import loo_sufficiency, r2_skill, ridge_loo
 from vcs.errors import VCSInputError
 
 if TYPE_CHECKING:
     from vcs.vessel import VesselModel
 
 
+#: Stages of a patient's chain, in order (the ``stage`` of an exclusion in atlas.json).
+STAGES = ("fit", "wall", "case", "mesh", "solve", "sampling")
+_MESH_UTILITIES = ("blockMesh", "snappyHexMesh", "checkMesh")
+
+
+def fit_exclusion(model: VesselModel) -> str | None:
+    """Reason to exclude a patient for the quality of its VCS fit (None: include).
+
+    ``vcs fit`` writes ``quality`` (``ok`` or ``poor``) and ``quality_reasons`` into the model's
+    ``meta`` (model.json), see :func:`vcs.vessel.fit_quality`.
+
+    Parameters
+    ----------
+    model : VesselModel
+
+    Returns
+    -------
+    str or None
+        One line: ``fit quality poor: <reasons>``.
+    """
+    if model.meta.get("quality") == "poor":
+        return "fit quality poor: " + "; ".join(model.meta.get("quality_reasons") or ["no reason recorded"])
+    return None
+
+
 def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool = False) -> str | None:
     """Reason to exclude a patient from its case ``status.json`` (None: include).
 
     Excluded when the file is missing, ``failed`` is true, ``status``/``state`` names a failure,
-    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``). With
-    ``accept_relaxed``, a case whose SIMPLE run did not converge but whose time-averaged fallback
-    met the relaxed criterion (``converged_relaxed`` true) is included. The reason quotes the
-    status's own ``reason``/``error``/``message``.
+    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``; a stationary
+    time average of its transient fallback is ``converged`` true). With ``accept_relaxed``, a
+    legacy status of the removed SIMPLE-iterate averaging with ``converged_relaxed`` true is
+    included (new runs never write it). The reason quotes the
+    status's own ``reason``/``error``/``message``; a failure recorded before the solver (a status
+    whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those) is its reason
+    as is.
 
     Parameters
     ----------
     status : mapping or None
         The parsed status.json; None when the file is missing.
     accept_relaxed : bool
-        Include cases that met only the relaxed (time-averaged) convergence criterion.
+        Include legacy statuses that met only the relaxed criterion (``converged_relaxed``).
 
     Returns
     -------
@@ -52,14 +80,91 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     if status is None:
         return "no status.json"
     detail = next((str(status[k]) for k in ("reason", "error", "message") if status.get(k)), "")
-    detail = f": {detail}" if detail else ""
     state = str(status.get("status", status.get("state", ""))).lower()
-    if status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout"):
+    failed = status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout")
+    if failed and status.get("stage") in ("fit", "wall", "case") and detail:
+        return detail
+    detail = f": {detail}" if detail else ""
+    if failed:
         return f"solver failed ({state or 'failed'}){detail}"
     if status.get("converged") is False:
         if accept_relaxed and status.get("converged_relaxed") is True:
             return None
         return f"not converged{detail}"
+    return None
+
+
+def status_stage(status: Mapping[str, Any] | None) -> str:
+    """The stage of :data:`STAGES` at which a case status ended: its own ``stage`` when it has one,
+    else ``mesh`` when meshing failed (``mesh_ok`` false, or the failed log is blockMesh's,
+    snappyHexMesh's or checkMesh's), else ``solve``."""
+    if not status:
+        return "solve"
+    if status.get("stage") in STAGES:
+        return str(status["stage"])
+    log = str(status.get("failed_log") or "")
+    if status.get("mesh_ok") is False or any(log.endswith(f"log.{u}") for u in _MESH_UTILITIES):
+        return "mesh"
+    return "solve"
+
+
+def fit_failure(report: Mapping[str, Any] | None) -> str | None:
+    """Reason to exclude a patient from its ``fit_report.json`` (None: include, or no report).
+
+    A fit that failed (the workflow then writes a failure record, ``failed: true``, in place of
+    the fit's outputs) is excluded with its ``reason``.
+    """
+    if report is None or report.get("failed") is not True:
+        return None
+    return str(report.get("reason") or f"{report.get('stage', 'fit')} failed")
+
+
+def fields_exclusion(fields: Mapping[str, Any] | None) -> str | None:
+    """Reason to exclude a patient from its resampled fields (None: include).
+
+    No fields, or a placeholder that carries an ``excluded`` reason instead of the arrays (the
+    workflow writes one when the case had no usable solution or the resampling failed).
+    """
+    if fields is None:
+        return "no resampled fields"
+    if "excluded" in fields:
+        return str(np.asarray(fields["excluded"]))
+    return None
+
+
+def patient_exclusion(
+    report: Mapping[str, Any] | None,
+    status: Mapping[str, Any] | None,
+    fields: Mapping[str, Any] | None,
+    *,
+    accept_relaxed: bool = False,
+) -> tuple[str, str] | None:
+    """(stage, reason) of the first reason to leave a patient out, looked for in its fit report
+    (:func:`fit_failure`), its status.json (:func:`status_exclusion`, stage :func:`status_stage`)
+    and its fields (:func:`fields_exclusion`, stage ``sampling`` unless the fields name another);
+    None to include the patient.
+
+    Parameters
+    ----------
+    report : mapping or None
+        fit_report.json (None: not known, nothing to say).
+    status : mapping or None
+        status.json (None: missing, which excludes).
+    fields : mapping or None
+        The resampled fields (None: missing, which excludes).
+    accept_relaxed : bool
+        See :func:`status_exclusion`.
+    """
+    reason = fit_failure(report)
+    if reason is not None:
+        return str((report or {}).get("stage") or "fit"), reason
+    reason = status_exclusion(status, accept_relaxed=accept_relaxed)
+    if reason is not None:
+        return status_stage(status), reason
+    reason = fields_exclusion(fields)
+    if reason is not None:
+        stage = str(np.asarray(fields["stage"])) if fields is not None and "stage" in fields else "sampling"
+        return stage, reason
     return None
 
 
@@ -73,6 +178,8 @@ class Atlas:
         Included patient ids (n), in input order.
     excluded : dict
         {patient id: reason} of the excluded patients.
+    exclusion_stages : dict
+        {patient id: stage of :data:`STAGES`} of the excluded patients (see :func:`patient_exclusion`).
     aligned_models : list of VesselModel
         The included models in atlas space.
     transforms : list of RigidTransform
@@ -88,7 +195,10 @@ class Atlas:
     grid : dict
         ``tau``, ``theta`` (rad), ``rho_n`` 1-D arrays of the resampled fields' grid.
     regression : dict
-        {field: :func:`vcs.atlas.regression.ridge_loo` result}.
+        {field: :func:`vcs.atlas.regression.ridge_loo` result, plus ``status`` (``ok`` or
+        ``insufficient_patients``, :func:`vcs.atlas.regression.loo_sufficiency`), ``status_reason``
+        and ``skill`` per flow mode (:func:`vcs.atlas.regression.r2_skill`; all
+        ``insufficient_patients`` when the status is)}.
     options : dict
         The options the atlas was computed with.
     alignment_mean : (n_tau_align * n_theta_align, 3) float, mm
@@ -107,6 +217,7 @@ class Atlas:
     regression: dict[str, dict[str, Any]]  # field -> ridge_loo result
     options: dict[str, Any]
     alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
+    exclusion_stages: dict[str, str] = field(default_factory=dict)  # excluded id -> stage
 
 
 def compute_atlas(
@@ -114,6 +225,7 @@ def compute_atlas(
     fields: Mapping[str, Mapping[str, Any]],
     statuses: Mapping[str, Mapping[str, Any] | None],
     *,
+    reports: Mapping[str, Mapping[str, Any] | None] | None = None,
     n_modes: int = 3,
     n_regression_scores: int | None = None,
     scale: bool = False,
@@ -129,12 +241,17 @@ def compute_atlas(
     Parameters
     ----------
     models : {patient id: VesselModel}
+        The fitted models; a patient of ``reports`` without a model (its fit failed) is excluded.
     fields : {patient id: dict of resampled arrays}
         As returned by :func:`vcs.cfd.resample.sample_case` or loaded from ``fields.npz``; a patient
-        without fields is excluded.
+        without fields, or with a placeholder carrying an ``excluded`` reason, is excluded.
     statuses : {patient id: status dict or None}
         From each case's status.json; see :func:`status_exclusion`. Patients absent from
         ``statuses`` count as included.
+    reports : {patient id: fit_report dict or None}, optional
+        From each fit's fit_report.json; see :func:`fit_failure`. The patients are those of
+        ``models`` and ``reports`` (in that order); each is excluded with the first reason of
+        :func:`patient_exclusion`.
     n_modes : int
         Modes kept per PCA (at most n_included - 1).
     n_regression_scores : int, optional
@@ -151,7 +268,7 @@ def compute_atlas(
     shape_block : {"all", "wall", "centerline"}
         Which part of the feature vector the shape PCA varies (:func:`vcs.atlas.pca.shape_matrix`).
     accept_relaxed : bool
-        Include time-averaged cases that met the relaxed criterion (:func:`status_exclusion`).
+        Include legacy statuses that met only the relaxed criterion (:func:`status_exclusion`).
 
     Returns
     -------
@@ -162,16 +279,26 @@ def compute_atlas(
     VCSInputError
         Fewer than 3 included patients, or fields resampled on different grids.
     """
-    excluded = {}
-    for pid in models:
-        reason = status_exclusion(statuses[pid], accept_relaxed=accept_relaxed) if pid in statuses else None
-        if reason is None and pid not in fields:
-            reason = "no resampled fields"
-        if reason is not None:
-            excluded[pid] = reason
+    reports = reports or {}
+    excluded, stages = {}, {}
+    for pid in dict.fromkeys([*models, *reports]):
+        reason = fit_exclusion(models[pid]) if pid in models else None
+        found = ("fit", reason) if reason is not None else None
+        if found is None:
+            found = patient_exclusion(
+                reports.get(pid),
+                statuses[pid] if pid in statuses else {},  # not given: nothing to say
+                fields.get(pid),
+                accept_relaxed=accept_relaxed,
+            )
+        if found is None and pid not in models:
+            found = ("fit", "no model")
+        if found is not None:
+            stages[pid], excluded[pid] = found
     patients = [pid for pid in models if pid not in excluded]
     if len(patients) < 3:
-        raise VCSInputError(f"an atlas needs at least 3 included patients, got {len(patients)} (excluded: {excluded})")
+        listed = "; ".join(f"{p} ({stages[p]}: {r})" for p, r in excluded.items()) or "none"
+        raise VCSInputError(f"an atlas needs at least 3 included patients, got {len(patients)} (excluded: {listed})")
     shapes0 = {
         f: np.shape(np.asarray(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f]))
         for f in flow_fields
@@ -185,9 +312,20 @@ def compute_atlas(
                     f"patient {patients[0]} "
                     f"{shapes0[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
                 )
+    # one L for the cohort: the largest any included patient was fitted with (each fitted with
+    # --L auto picks what its vessel needs); the others are refitted to it (VesselModel.with_n_knots)
+    knots = {p: models[p].n_knots for p in patients}
+    L = max(knots.values())
     aligned, transforms, report = align_models(
-        [models[p] for p in patients], n_tau=n_tau_align, n_theta=n_theta_align, scale=scale
+        [models[p].with_n_knots(L) for p in patients], n_tau=n_tau_align, n_theta=n_theta_align, scale=scale
     )
+    report["knots"] = {
+        "L": L,
+        "K": None if aligned[0].wall is None else aligned[0].wall.K,
+        "R": None if aligned[0].wall is None else aligned[0].wall.R,
+        "L_rule": "the largest L of the included patients; smaller ones refitted to it",
+        "L_fitted": knots,
+    }
     gpa_mean = report.pop("mean_points_mm")
     shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
     flow = {
@@ -195,7 +333,13 @@ def compute_atlas(
         for f in flow_fields
     }
     k = min(n_regression_scores or n_modes, shape.n_modes)
-    regression = {f: ridge_loo(shape.scores[:, :k], flow[f].scores) for f in flow_fields}
+    sufficiency, why = loo_sufficiency(len(patients), k)
+    regression = {}
+    for f in flow_fields:
+        r = ridge_loo(shape.scores[:, :k], flow[f].scores)
+        r["status"], r["status_reason"] = sufficiency, why
+        r["skill"] = [sufficiency if sufficiency != "ok" else r2_skill(float(v)) for v in np.atleast_1d(r["r2"])]
+        regression[f] = r
     f0 = fields[patients[0]]
     grid = {key: np.asarray(f0[key]) for key in ("tau", "theta", "rho_n") if key in f0}
     return Atlas(
@@ -220,6 +364,7 @@ def compute_atlas(
             "accept_relaxed": accept_relaxed,
         },
         gpa_mean,
+        stages,
     )
 
 
@@ -251,6 +396,7 @@ def project_model(atlas: Atlas, model: VesselModel, *, n_modes: int | None = Non
         ``model`` is incompatible with the atlas (:func:`vcs.atlas.procrustes.check_compatible`).
     """
     template = atlas.aligned_models[0]
+    model = model.with_n_knots(template.n_knots)
     check_compatible([template, model])
     n_tau, n_theta = atlas.options["n_tau_align"], atlas.options["n_theta_align"]
     T = procrustes(wall_grid_points(model, n_tau, n_theta), atlas.alignment_mean, scale=atlas.options["scale"])
@@ -281,12 +427,18 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
     dict
         JSON-ready: patients included/excluded (with reasons), options, alignment (with each
         patient's transform), explained variances, sigmas and scores of the shape and flow PCAs,
-        and the leave-one-out R^2 of the shape -> flow regression (null where undefined).
+        and the leave-one-out R^2 of the shape -> flow regression (null where undefined) with its
+        ``status`` (``insufficient_patients`` when leave-one-out cannot say anything) and the
+        ``skill`` of each flow mode (``none`` for R^2 <= 0).
     """
+    first = next(iter(atlas.regression.values()), {})
     return {
         "patients_included": list(atlas.patients),
-        "patients_excluded": [{"id": p, "reason": r} for p, r in atlas.excluded.items()],
+        "patients_excluded": [
+            {"id": p, "stage": atlas.exclusion_stages.get(p, "solve"), "reason": r} for p, r in atlas.excluded.items()
+        ],
         "options": atlas.options,
+        "knots": atlas.alignment_report.get("knots"),
         "alignment": {
             **atlas.alignment_report,
             "transforms": {p: t.to_dict() for p, t in zip(atlas.patients, atlas.transforms)},
@@ -303,8 +455,12 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
             "method": "ridge on the first k standardised shape scores, alpha by inner leave-one-out; "
             "R^2 by outer leave-one-out (1 - PRESS / SS_tot)",
             "k_shape_scores": atlas.options["n_regression_scores"],
+            "n_patients": len(atlas.patients),
+            "status": first.get("status", "ok"),
+            "status_reason": first.get("status_reason", ""),
             "loo_r2": {
                 f: [None if not np.isfinite(v) else float(v) for v in r["r2"]] for f, r in atlas.regression.items()
             },
+            "skill": {f: list(r.get("skill", [])) for f, r in atlas.regression.items()},
         },
     }

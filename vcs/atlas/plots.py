@@ -7,17 +7,22 @@ Everything renders headless. 3-D views use pyvista off-screen; when VTK cannot o
 render window (no OSMesa/EGL build, no display), the same figure is drawn with matplotlib as a 2-D
 longitudinal section (tau, signed rho) and the fallback is recorded in the returned file list.
 
-Files written by :func:`write_atlas_figures` into ``out_dir`` (all in mm, atlas space):
+Files written by :func:`write_atlas_figures` into ``out_dir`` (VTP/VTU, all in mm, atlas space)
+and its ``png_dir`` (PNG, default ``out_dir/figures``; each figure is written once):
 
 * ``shape_mean.vtp``: the mean shape, wall surface (Eq. 8) + centerline polyline;
 * ``shape_mode{k}_{plus,minus}2sigma.vtp``: mean +- 2 sigma along shape mode k, with point data
   ``centerline_displacement`` (|delta c(tau)|), ``radius_change`` (delta rho_w), ``displacement``;
+* ``shape_mean.png``: the mean wall radius map and cross-sections near the inlet;
 * ``shape_mode{k}_deformation.png``: paper Fig. 7 (|delta c| vs tau, delta rho_w over (tau, theta));
 * ``explained_variance.png``: shape and flow explained variance per mode;
 * ``flow_mean.vtu``: mean U, p, WSS on the mean shape's grid; per field and mode the mode's
   +-2 sigma fields and a ``{field}_mode{k}_top20`` mask (cells in the top 20 % of the variation);
 * ``flow_{field}_mode{k}.png``: theta-clipped lumen views (paper Figs. 8-9): mean - 2 sigma, mean,
-  mean + 2 sigma, and the top-20 % region.
+  mean + 2 sigma, and the top-20 % region. The three field panels share one colour scale, from the
+  2nd to the 98th percentile of their values (:func:`robust_limits`: one outlying patient, whose
+  mode sends a few cells far off, does not darken every panel); values beyond are drawn at the
+  ends of the scale.
 """
 
 from __future__ import annotations
@@ -41,6 +46,16 @@ if TYPE_CHECKING:
 PathLike = str | Path
 
 log = logging.getLogger(__name__)
+
+#: Percentiles of a flow figure's values that set its (shared) colour limits.
+COLOUR_PERCENTILES = (2.0, 98.0)
+#: Width of a label character relative to the font size (digits, '-', '.' of VTK's Arial: ~0.55).
+_CHAR_WIDTH = 0.6
+PANEL_PX = (420, 520)  # width, height of one panel of a clipped view
+LABEL_FONT_PX = 14
+TITLE_FONT_PT = 9  # panel titles (pyvista font size)
+NOTE_FONT_PT = 7
+BAR_Y, BAR_HEIGHT = 0.05, 0.08  # colour bar position and height (fractions of the panel)
 
 
 def _plt() -> Any:
@@ -90,7 +105,13 @@ def shape_polydata(
 
 
 def write_shape_files(
-    pca: PCA, template: VesselModel, out_dir: PathLike, *, n_modes: int | None = None, n_sigma: float = 2.0
+    pca: PCA,
+    template: VesselModel,
+    out_dir: PathLike,
+    *,
+    n_modes: int | None = None,
+    n_sigma: float = 2.0,
+    png_dir: PathLike | None = None,
 ) -> dict[str, str]:
     """Mean shape and mean +- n_sigma shapes (VTP) and the Fig. 7 deformation PNG per mode.
 
@@ -106,6 +127,8 @@ def write_shape_files(
         Modes written (default all).
     n_sigma : float
         The +- shapes are mean +- n_sigma sigma_m u_m.
+    png_dir : str or Path, optional
+        Existing directory of the PNGs (default ``out_dir``).
 
     Returns
     -------
@@ -117,11 +140,12 @@ def write_shape_files(
     from vcs.vessel import VesselModel
 
     out = Path(out_dir)
+    pngs = Path(png_dir) if png_dir is not None else out
     files = {"shape_mean": "shape_mean.vtp"}
     mean = VesselModel.from_feature_vector(pca.mean, template)
     shape_polydata(mean).save(str(out / files["shape_mean"]))
-    mean_shape_png(mean, out / "shape_mean.png")
-    files["shape_mean_png"] = "shape_mean.png"
+    mean_shape_png(mean, pngs / "shape_mean.png")
+    files["shape_mean_png"] = _relative(pngs / "shape_mean.png", out)
     for k in range(min(n_modes or pca.n_modes, pca.n_modes)):
         for sign, tag in ((1.0, "plus"), (-1.0, "minus")):
             d = mode_deformation(pca, template, k, n_sigma=sign * n_sigma)
@@ -138,24 +162,60 @@ def write_shape_files(
             )
             files[f"shape_mode{k + 1}_{tag}"] = name
             if sign > 0:
-                png = f"shape_mode{k + 1}_deformation.png"
+                png = pngs / f"shape_mode{k + 1}_deformation.png"
                 deformation_png(
                     d,
-                    out / png,
+                    png,
                     title=f"shape mode {k + 1} (+{n_sigma:g} sigma, "
                     f"{100 * pca.explained_variance_ratio[k]:.1f}% variance)",
                 )
-                files[f"shape_mode{k + 1}_deformation"] = png
+                files[f"shape_mode{k + 1}_deformation"] = _relative(png, out)
     return files
 
 
-def mean_shape_png(
-    mean: VesselModel, path: PathLike, *, root_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)
-) -> None:
-    """PNG of the mean shape's wall radius: a map and cross-sections near the root.
+def _relative(path: Path, root: Path) -> str:
+    """``path`` relative to ``root`` when inside it (POSIX separators), else absolute."""
+    try:
+        return path.resolve().relative_to(root.resolve()).as_posix()
+    except ValueError:
+        return str(path.resolve())
 
-    The wall radius rho_w(tau, theta) (mm) as a map over (tau, theta), and the cross-sections at
-    ``root_taus`` as polar curves (the sinuses of Valsalva show as three lobes).
+
+def sinus_lobes(wall: Any, *, taus: np.ndarray | None = None) -> float:
+    """Largest relative amplitude of the three-fold harmonic of rho_w(theta) near the inlet.
+
+    The three sinuses of Valsalva of an aortic root make the cross-sections three-lobed (~3.5 % of
+    the radius on the demo phantoms' mean shape; < 0.5 % elsewhere and on plain tubes).
+
+    Parameters
+    ----------
+    wall : callable (tau, theta) -> rho_w
+        The wall model (e.g. ``VesselModel.fitted_wall()``).
+    taus : (m,) float, optional
+        Sections searched (default 16 in tau in [0, 0.15]).
+
+    Returns
+    -------
+    float
+        max over the sections of |3rd Fourier coefficient| / mean radius.
+    """
+    th = np.linspace(0.0, TWO_PI, 256, endpoint=False)
+    best = 0.0
+    for t in np.linspace(0.0, 0.15, 16) if taus is None else taus:
+        r = np.asarray(wall(np.full_like(th, t), th), float)
+        best = max(best, float(2 * np.abs(np.fft.rfft(r)[3]) / len(r) / max(r.mean(), 1e-12)))
+    return best
+
+
+#: Three-fold harmonic (relative) above which the inlet is called an aortic root (:func:`sinus_lobes`).
+ROOT_LOBES = 0.02
+
+
+def mean_shape_png(
+    mean: VesselModel, path: PathLike, *, inlet_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)
+) -> None:
+    """PNG of the mean shape's wall radius: a map and cross-sections near the inlet
+    (:func:`mean_shape_figure`).
 
     Parameters
     ----------
@@ -163,9 +223,37 @@ def mean_shape_png(
         The mean shape (a wall model is needed).
     path : str or Path
         Output PNG.
-    root_taus : tuple of float
+    inlet_taus : tuple of float
         tau of the cross-sections, in [0, 1].
     """
+    plt = _plt()
+    fig = mean_shape_figure(mean, inlet_taus=inlet_taus)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def mean_shape_figure(mean: VesselModel, *, inlet_taus: tuple[float, ...] = (0.0, 0.04, 0.07, 0.1, 0.2)) -> Any:
+    """matplotlib Figure of the mean shape's wall radius: a map and cross-sections near the inlet.
+
+    The wall radius rho_w(tau, theta) (mm) as a map over (tau, theta), and the cross-sections at
+    ``inlet_taus`` as polar curves. The cross-sections are said to be near an aortic root only
+    when they show its three sinus lobes (:func:`sinus_lobes` above :data:`ROOT_LOBES`); otherwise
+    near the inlet (tau = 0), whatever the vessel is.
+
+    Parameters
+    ----------
+    mean : VesselModel
+        The mean shape (a wall model is needed).
+    inlet_taus : tuple of float
+        tau of the cross-sections, in [0, 1].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Axes 0: the map; axes 2: the polar cross-sections (axes 1 is the map's colour bar).
+    """
+    from matplotlib.ticker import MaxNLocator
+
     plt = _plt()
     th = np.linspace(0.0, TWO_PI, 181)
     tau = np.linspace(0.0, 1.0, 201)
@@ -173,21 +261,40 @@ def mean_shape_png(
     R = wall(tau[:, None], th[None, :])
     fig = plt.figure(figsize=(10, 3.8), dpi=110)
     ax = fig.add_subplot(1, 2, 1)
-    im = ax.imshow(R.T, origin="lower", aspect="auto", extent=(0, 1, 0, TWO_PI), cmap="viridis")
+    centre, half = 0.5 * (R.max() + R.min()), max(0.5 * np.ptp(R), 1e-3 * abs(R.mean()))  # no round-off noise map
+    im = ax.imshow(
+        R.T,
+        origin="lower",
+        aspect="auto",
+        extent=(0, 1, 0, TWO_PI),
+        cmap="viridis",
+        vmin=centre - half,
+        vmax=centre + half,
+    )
     ax.set_xlabel("tau")
     ax.set_ylabel("theta (rad)")
-    ax.set_title("mean shape: wall radius rho_w (mm)")
-    fig.colorbar(im, ax=ax)
+    ax.set_title("mean shape: wall radius rho_w")
+    cb = fig.colorbar(im, ax=ax, label="rho_w (mm)")
+    cb.locator = MaxNLocator(5)
+    cb.update_ticks()
     axp = fig.add_subplot(1, 2, 2, projection="polar")
-    radii = [wall(np.full_like(th, t), th) for t in root_taus]
-    for t, r in zip(root_taus, radii):
+    radii = [wall(np.full_like(th, t), th) for t in inlet_taus]
+    for t, r in zip(inlet_taus, radii):
         axp.plot(th, r, label=f"tau = {t:g}")
     axp.set_rmin(0.8 * min(r.min() for r in radii))  # an offset radial axis shows the lobes
-    axp.set_title("cross-sections near the root (mm)", fontsize=9)
-    axp.legend(fontsize=7, loc="lower left", bbox_to_anchor=(1.0, 0.0))
+    axp.yaxis.set_major_locator(MaxNLocator(3))  # few radial labels: they sit in a narrow band
+    axp.set_rlabel_position(112.5)
+    axp.tick_params(labelsize=7)
+    lobes = sinus_lobes(wall)
+    where = (
+        f"near the inlet: an aortic root\n(three sinus lobes, {100 * lobes:.1f} % of the radius)"
+        if lobes > ROOT_LOBES
+        else f"near the inlet (tau {min(inlet_taus):g}-{max(inlet_taus):g})"
+    )
+    axp.set_title(f"rho_w (mm) of cross-sections {where}", fontsize=9)
+    axp.legend(fontsize=7, loc="lower left", bbox_to_anchor=(1.05, 0.0))
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return fig
 
 
 def deformation_png(d: dict[str, Any], path: PathLike, *, title: str = "") -> None:
@@ -329,6 +436,148 @@ def _half(a: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return a[:, keep]
 
 
+def robust_limits(arrays: Any, percentiles: tuple[float, float] = COLOUR_PERCENTILES) -> tuple[float, float]:
+    """Colour limits shared by several panels: percentiles of all their finite values together.
+
+    Parameters
+    ----------
+    arrays : iterable of arrays
+        The values of every panel that shares the scale.
+    percentiles : (lo, hi)
+        Default the 2nd and 98th percentile (:data:`COLOUR_PERCENTILES`).
+
+    Returns
+    -------
+    (float, float)
+        lo < hi (widened around a constant value; (0, 1) without finite values).
+    """
+    v = np.concatenate([np.ravel(np.asarray(a, float)) for a in arrays])
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 0.0, 1.0
+    lo, hi = (float(x) for x in np.percentile(v, percentiles))
+    if not hi > lo:
+        pad = max(abs(lo), 1.0) * 1e-6
+        lo, hi = lo - pad, hi + pad
+    return lo, hi
+
+
+def colour_bar_labels(lo: float, hi: float, *, width_px: float, font_px: float = LABEL_FONT_PX) -> tuple[str, int]:
+    """printf format and number of labels (at most 5) of a horizontal colour bar whose labels do
+    not overlap: VTK spaces them evenly over ``width_px``, so the widest label (at
+    :data:`_CHAR_WIDTH` x ``font_px`` per character) plus a 25 % gap must fit the spacing.
+
+    Parameters
+    ----------
+    lo, hi : float
+        Colour limits.
+    width_px : float
+        Width of the bar in pixels.
+    font_px : float
+        Label font size in pixels.
+
+    Returns
+    -------
+    (str, int)
+        e.g. ``("%.1f", 5)``; at least 2 labels.
+    """
+    for n in range(5, 1, -1):
+        ticks = np.linspace(lo, hi, n)
+        big = max(abs(lo), abs(hi))
+        if big >= 1e5 or big < 1e-3:
+            fmt = "%.1e"
+        else:
+            step = (hi - lo) / (n - 1)
+            fmt = f"%.{max(0, -int(np.floor(np.log10(step))))}f"
+        widest = max(len(fmt % t) for t in ticks) * _CHAR_WIDTH * font_px
+        if 1.25 * widest <= width_px / (n - 1):
+            return fmt, n
+    return fmt, 2
+
+
+def clipped_view_plotter(
+    points: np.ndarray,
+    theta: np.ndarray,
+    panels: list[tuple[str, np.ndarray, str]],
+    *,
+    label: str,
+    clim: tuple[float, float],
+    view_normal: np.ndarray | None = None,
+    note: str = "",
+) -> pyvista.Plotter:
+    """The off-screen pyvista Plotter of :func:`clipped_view_png` (one subplot per panel).
+
+    The panels whose colour map is the first panel's share ``clim`` and one colour bar titled
+    ``label`` (in the middle one of them); the other panels (the top-20 % mask) have none: their
+    title says what the colour means.
+
+    Raises
+    ------
+    Exception
+        Whatever VTK raises when no off-screen render window can be opened.
+    """
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    w, h = PANEL_PX
+    pts = _half(points, theta)
+    pl = pv.Plotter(off_screen=True, shape=(1, len(panels)), window_size=[w * len(panels), h])
+    centre = points.reshape(-1, 3).mean(axis=0)
+    if view_normal is None:
+        view_normal = np.array([0.0, 0.0, 1.0])
+    shared = [i for i, (_, _, c) in enumerate(panels) if c == panels[0][2]]
+    bar_panel = shared[len(shared) // 2]
+    bar_width = 0.8
+    fmt, n_labels = colour_bar_labels(*clim, width_px=bar_width * w)
+    for i, (title, values, cmap) in enumerate(panels):
+        pl.subplot(0, i)
+        g = grid_to_vtk(pts, {label: _half(values, theta)}, close_theta=False)
+        surf = g.extract_surface(algorithm="dataset_surface")
+        pl.add_mesh(
+            surf,
+            scalars=label,
+            cmap=cmap,  # type: ignore[arg-type]  # any matplotlib colour-map name
+            clim=clim if i in shared else (0.0, 1.0),
+            show_scalar_bar=i == bar_panel,
+            scalar_bar_args={
+                "title": label,
+                "vertical": False,
+                "width": bar_width,
+                "position_x": (1.0 - bar_width) / 2,
+                "position_y": BAR_Y,
+                "height": BAR_HEIGHT,
+                "n_labels": n_labels,
+                "fmt": fmt,
+                "label_font_size": LABEL_FONT_PX,
+            },
+        )
+        if i == bar_panel:
+            # VTK draws a horizontal bar's title over its middle label: labels below the bar,
+            # the title as a text of its own above it
+            bar = pl.scalar_bars[label]
+            bar.SetTitle("")
+            bar.SetTextPositionToPrecedeScalarBar()
+            text = pl.add_text(
+                label,
+                position=(0.5, BAR_Y + BAR_HEIGHT + 0.005),
+                viewport=True,
+                font_size=TITLE_FONT_PT,
+                name="colour_bar_title",
+            )
+            text.prop.justification_horizontal = "center"
+        # text actors at fixed pixel sizes (corner annotations rescale per viewport)
+        pl.add_text(title, position=(0.03, 0.93), viewport=True, font_size=TITLE_FONT_PT)
+        if note and i == 0:
+            pl.add_text(note, position=(0.03, 0.02), viewport=True, font_size=NOTE_FONT_PT)
+        pl.camera_position = [
+            tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
+            tuple(centre),
+            (0.0, 0.0, 1.0) if abs(view_normal[2]) < 0.9 else (0.0, 1.0, 0.0),
+        ]
+        pl.renderer.reset_camera()  # same direction, the vessel fills the panel
+    return pl
+
+
 def clipped_view_png(
     points: np.ndarray,
     theta: np.ndarray,
@@ -336,7 +585,9 @@ def clipped_view_png(
     path: PathLike,
     *,
     label: str,
+    clim: tuple[float, float] | None = None,
     view_normal: np.ndarray | None = None,
+    note: str = "",
 ) -> str:
     """PNG of theta-clipped lumen views (paper Figs. 8-9), one view per panel.
 
@@ -350,71 +601,87 @@ def clipped_view_png(
         Grid points.
     theta : (n_theta,) float, rad
     panels : list of (title, (n_tau, n_theta, n_rho) float array, colour map name)
-        Panels sharing the first panel's colour map share its colour limits.
+        Panels sharing the first panel's colour map share ``clim`` and one colour bar; the others
+        are drawn on (0, 1) without a colour bar (a mask).
     path : str or Path
         Output PNG.
     label : str
-        Name (with units) of the scalar shown.
+        Name (with units) of the scalar shown: the colour bar's title.
+    clim : (float, float), optional
+        Colour limits of the shared panels (default :func:`robust_limits` of their values).
     view_normal : (3,) float, optional
         Camera direction from the centre (default +z).
+    note : str
+        A small line at the bottom of the first panel (e.g. how the limits were chosen).
 
     Returns
     -------
     str
         The renderer used: ``"pyvista"`` or ``"matplotlib"``.
     """
-    pts = _half(points, theta)
+    if clim is None:
+        clim = robust_limits([v for _, v, c in panels if c == panels[0][2]])
     try:
-        import pyvista as pv
-
-        pv.OFF_SCREEN = True
-        pl = pv.Plotter(off_screen=True, shape=(1, len(panels)), window_size=[420 * len(panels), 520])
-        centre = points.reshape(-1, 3).mean(axis=0)
-        if view_normal is None:
-            view_normal = np.array([0.0, 0.0, 1.0])
-        same = [v for _, v, c in panels if c == panels[0][2]]  # panels sharing a colour map share limits
-        clim = (float(min(np.min(v) for v in same)), float(max(np.max(v) for v in same)))
-        for i, (title, values, cmap) in enumerate(panels):
-            pl.subplot(0, i)
-            g = grid_to_vtk(pts, {label: _half(values, theta)}, close_theta=False)
-            surf = g.extract_surface(algorithm="dataset_surface")
-            pl.add_mesh(
-                surf,
-                scalars=label,
-                cmap=cmap,  # type: ignore[arg-type]  # any matplotlib colour-map name
-                show_scalar_bar=True,
-                clim=clim if cmap == panels[0][2] else None,
-                scalar_bar_args={"title": f"{label} {i}", "vertical": False},
-            )
-            pl.add_text(title, font_size=9)
-            pl.camera_position = [
-                tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
-                tuple(centre),
-                (0.0, 0.0, 1.0) if abs(view_normal[2]) < 0.9 else (0.0, 1.0, 0.0),
-            ]
+        pl = clipped_view_plotter(points, theta, panels, label=label, clim=clim, view_normal=view_normal, note=note)
         pl.screenshot(str(path))
         pl.close()
         return "pyvista"
     except Exception as exc:  # no off-screen render window: fall back to a 2-D section
         log.warning("pyvista off-screen rendering failed (%s); drawing %s with matplotlib", exc, Path(path).name)
     plt = _plt()
-    fig, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 3.2), dpi=110, squeeze=False)
-    j_pi = int(np.argmin(np.abs(theta - np.pi)))
-    for ax, (title, values, cmap) in zip(axes[0], panels):
-        # longitudinal section: theta = 0 above the axis, theta = pi below
-        sec = np.concatenate([values[:, j_pi, ::-1], values[:, 0, 1:]], axis=1)
-        im = ax.imshow(sec.T, origin="lower", aspect="auto", cmap=cmap, extent=(0, 1, -1, 1))
-        ax.set_title(title, fontsize=9)
-        ax.set_xlabel("tau")
-        ax.set_ylabel("signed rho_n (theta = 0 / pi)")
-        fig.colorbar(im, ax=ax, label=label)
-    fig.tight_layout()
+    fig = clipped_view_figure(theta, panels, label=label, clim=clim, note=note)
     fig.savefig(path)
     plt.close(fig)
     return "matplotlib"
 
 
-def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -> dict[str, Any]:
+def clipped_view_figure(
+    theta: np.ndarray,
+    panels: list[tuple[str, np.ndarray, str]],
+    *,
+    label: str,
+    clim: tuple[float, float],
+    note: str = "",
+) -> Any:
+    """The matplotlib fallback of :func:`clipped_view_png`: longitudinal sections (tau, signed
+    rho_n; theta = 0 above the axis, theta = pi below), the shared panels on ``clim`` with one
+    colour bar titled ``label``, at most 5 ticks."""
+    from matplotlib.ticker import MaxNLocator
+
+    plt = _plt()
+    fig, axes = plt.subplots(
+        1,
+        len(panels),
+        figsize=(3.6 * len(panels) + 1.2, 3.4),
+        dpi=110,
+        squeeze=False,
+        sharey=True,
+        layout="constrained",
+    )
+    j_pi = int(np.argmin(np.abs(theta - np.pi)))
+    shared_axes, image = [], None
+    for ax, (title, values, cmap) in zip(axes[0], panels):
+        sec = np.concatenate([values[:, j_pi, ::-1], values[:, 0, 1:]], axis=1)
+        lim = clim if cmap == panels[0][2] else (0.0, 1.0)
+        im = ax.imshow(sec.T, origin="lower", aspect="auto", cmap=cmap, extent=(0, 1, -1, 1), vmin=lim[0], vmax=lim[1])
+        if cmap == panels[0][2]:
+            shared_axes.append(ax)
+            image = im
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("tau")
+    axes[0][0].set_ylabel("signed rho_n (theta = 0 / pi)")
+    if image is not None:
+        cb = fig.colorbar(image, ax=shared_axes, label=label, location="bottom", shrink=0.6, aspect=40)
+        cb.locator = MaxNLocator(5)
+        cb.update_ticks()
+    if note:
+        fig.text(0.01, 0.01, note, fontsize=7)
+    return fig
+
+
+def write_flow_files(
+    atlas: Atlas, mean_model: VesselModel, out_dir: PathLike, *, png_dir: PathLike | None = None
+) -> dict[str, Any]:
     """flow_mean.vtu (:func:`flow_grid`) and the clipped-view PNG of every field and mode.
 
     Parameters
@@ -423,15 +690,20 @@ def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -
     mean_model : VesselModel
         The mean shape.
     out_dir : str or Path
-        Existing output directory.
+        Existing output directory (the VTU).
+    png_dir : str or Path, optional
+        Existing directory of the PNGs (default ``out_dir``).
 
     Returns
     -------
     dict
         {what: file name relative to ``out_dir``}: ``flow_mean`` and ``flow_{field}_mode{k}``,
-        plus ``renderer``: the sorted list of 3-D renderers used (not a file).
+        plus (not files) ``renderer``: the sorted list of 3-D renderers used, and
+        ``colour_limits``: {figure key: [lo, hi]} of the shared panels (:func:`robust_limits`; for
+        a wall field, of its values on the wall).
     """
     out = Path(out_dir)
+    pngs = Path(png_dir) if png_dir is not None else out
     grid, info = flow_grid(atlas, mean_model)
     files: dict[str, Any] = {"flow_mean": "flow_mean.vtu"}
     grid.save(str(out / files["flow_mean"]))
@@ -440,47 +712,68 @@ def write_flow_files(atlas: Atlas, mean_model: VesselModel, out_dir: PathLike) -
     _, v1, v2 = mean_model.vcs.frame(np.array([0.5]))
     view = -v2[0]
     renderers = set()
+    limits: dict[str, list[float]] = {}
+    lo_pc, hi_pc = COLOUR_PERCENTILES
+    note = f"colour scale: {lo_pc:g}-{hi_pc:g} % of the 3 panels' values"
     for f, d in info["panels"].items():
         cmap = "coolwarm" if f == "p" else "viridis"
         label = {"U": "|U| (m/s)", "p": "p (Pa)", "WSS": "|WSS| (Pa)"}.get(f, f)
+        on_wall = len(atlas.field_shapes[f]) - (1 if f in VECTOR_FIELDS else 0) == 2  # (n_tau, n_theta[, 3])
         for k, (minus, plus, mask) in enumerate(d["modes"]):
             panels = [
                 (f"{f} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
                 (f"{f} mean", _scalar(d["mean"]), cmap),
                 (f"{f} mean + 2 sigma (mode {k + 1})", _scalar(plus), cmap),
-                (f"{f} mode {k + 1}: top 20% variation", mask.astype(float), "Reds"),
+                (f"{f} mode {k + 1}: top 20 % variation (red)", mask.astype(float), "Reds"),
             ]
-            name = f"flow_{f}_mode{k + 1}.png"
-            renderers.add(clipped_view_png(info["points"], theta, panels, out / name, label=label, view_normal=view))
-            files[f"flow_{f}_mode{k + 1}"] = name
+            values = [v[:, :, -1] if on_wall else v for _, v, _ in panels[:3]]  # inside a wall field: zeros
+            clim = robust_limits(values)
+            key = f"flow_{f}_mode{k + 1}"
+            png = pngs / f"{key}.png"
+            renderers.add(
+                clipped_view_png(
+                    info["points"], theta, panels, png, label=label, clim=clim, view_normal=view, note=note
+                )
+            )
+            files[key] = _relative(png, out)
+            limits[key] = [clim[0], clim[1]]
     files["renderer"] = sorted(renderers)
+    files["colour_limits"] = limits
     return files
 
 
-def write_atlas_figures(atlas: Atlas, out_dir: PathLike) -> dict[str, Any]:
+def write_atlas_figures(atlas: Atlas, out_dir: PathLike, *, png_dir: PathLike | None = None) -> dict[str, Any]:
     """Write all atlas VTP/VTU/PNG files (see the module doc).
 
     Parameters
     ----------
     atlas : Atlas
     out_dir : str or Path
-        Existing output directory.
+        Existing output directory (VTP/VTU).
+    png_dir : str or Path, optional
+        Directory of the PNGs (default ``out_dir/figures``; created), each written once.
 
     Returns
     -------
     dict
         ``files``: {what: file name relative to ``out_dir``}; ``renderer``: list of the 3-D
-        renderer(s) used (``"pyvista"``, ``"matplotlib"``), empty without flow figures.
+        renderer(s) used (``"pyvista"``, ``"matplotlib"``), empty without flow figures;
+        ``colour_limits``: {flow figure: [lo, hi]} (see :func:`write_flow_files`).
     """
     from vcs.vessel import VesselModel
 
     out = Path(out_dir)
+    pngs = Path(png_dir) if png_dir is not None else out / "figures"
+    pngs.mkdir(parents=True, exist_ok=True)
     template = atlas.aligned_models[0]
-    files: dict[str, Any] = write_shape_files(atlas.shape, template, out, n_modes=atlas.options["n_modes"])
-    explained_variance_png(atlas, out / "explained_variance.png")
-    files["explained_variance"] = "explained_variance.png"
+    files: dict[str, Any] = write_shape_files(
+        atlas.shape, template, out, n_modes=atlas.options["n_modes"], png_dir=pngs
+    )
+    explained_variance_png(atlas, pngs / "explained_variance.png")
+    files["explained_variance"] = _relative(pngs / "explained_variance.png", out)
     if atlas.flow and atlas.grid:
         mean_model = VesselModel.from_feature_vector(atlas.shape.mean, template)
-        files.update(write_flow_files(atlas, mean_model, out))
+        files.update(write_flow_files(atlas, mean_model, out, png_dir=pngs))
     renderer = files.pop("renderer", [])
-    return {"files": files, "renderer": renderer}
+    limits = files.pop("colour_limits", {})
+    return {"files": files, "renderer": renderer, "colour_limits": limits}

@@ -47,6 +47,48 @@ def _gcv_alpha(X: np.ndarray, Y: np.ndarray, alphas: np.ndarray | Sequence[float
 
 DEFAULT_ALPHAS = tuple(np.logspace(-6, 4, 21))
 
+#: Fewest samples for which a leave-one-out R^2 is reported as meaningful (with k regressors, at
+#: least k + 2 are needed as well: every fold must still fit k slopes and an intercept with one
+#: residual degree of freedom).
+MIN_LOO_SAMPLES = 5
+#: R^2 at or above which a flow mode's prediction counts as ``good`` (below: ``weak``; <= 0: ``none``).
+GOOD_SKILL_R2 = 0.5
+
+
+def loo_sufficiency(n: int, k: int) -> tuple[str, str]:
+    """Whether a leave-one-out R^2 over ``n`` samples with ``k`` regressors can say anything.
+
+    Parameters
+    ----------
+    n : int
+        Samples (included patients).
+    k : int
+        Regressors (shape scores).
+
+    Returns
+    -------
+    status : {"ok", "insufficient_patients"}
+    reason : str
+        One line, e.g. ``"4 included patients: leave-one-out with k = 2 shape scores needs at least 5"``.
+    """
+    need = max(MIN_LOO_SAMPLES, k + 2)
+    reason = f"{n} included patients: leave-one-out with k = {k} shape scores needs at least {need}"
+    return ("ok" if n >= need else "insufficient_patients"), reason
+
+
+def r2_skill(r2: float | None) -> str:
+    """Verbal skill of a leave-one-out R^2.
+
+    ``none`` for R^2 <= 0 (no better than predicting the cohort mean), ``weak`` for
+    0 < R^2 < :data:`GOOD_SKILL_R2`, ``good`` above, ``undefined`` for nan/None (a flow mode without
+    variance).
+    """
+    if r2 is None or not np.isfinite(r2):
+        return "undefined"
+    if r2 <= 0.0:
+        return "none"
+    return "weak" if r2 < GOOD_SKILL_R2 else "good"
+
 
 def ridge_loo(X: ArrayLike, Y: ArrayLike, *, alphas: ArrayLike = DEFAULT_ALPHAS) -> dict[str, Any]:
     """Leave-one-out cross-validated ridge regression Y ~ X (beyond the paper).

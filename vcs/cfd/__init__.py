@@ -3,7 +3,7 @@ and resample a finished case onto the vessel's (tau, theta, rho_n) grid.
 
 Public API::
 
-    from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case, sample_case
+    from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case, sample_case, write_fields
 
     state = render_case("case", "wall.stl", {"inlet": {"type": "parabolic", "flow_rate": 3e-5}})
     status = run_case("case", ranks=2)            # also written to case/status.json

@@ -11,6 +11,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -39,6 +40,35 @@ from vcs.cfd.openfoam import detect_openfoam, foam_env
 STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
 
 
+def _run_group(
+    cmd: list[str], cwd: Path, env: dict[str, str], out: Any, timeout: float | None
+) -> subprocess.CompletedProcess[bytes]:
+    """Run ``cmd`` in its own process group and wait; on a timeout, Ctrl-C (KeyboardInterrupt) or
+    any other exit of the caller, stop the WHOLE group (mpirun and every rank: SIGTERM, then
+    SIGKILL after 5 s) before re-raising, so that no solver keeps running after its job ended."""
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=timeout))
+    except BaseException:
+        stop_group(proc)
+        raise
+
+
+def stop_group(proc: subprocess.Popen[bytes]) -> None:
+    """SIGTERM to the process group of ``proc`` (started with ``start_new_session``), SIGKILL
+    after 5 s if it is still there."""
+    for sig, grace in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(timeout=grace)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+
+
 class _Runner:
     """Runs OpenFOAM utilities in a case, each logged to ``logs/log.<name>`` and timed."""
 
@@ -52,7 +82,9 @@ class _Runner:
 
     def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess[bytes]:
         """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9,
-        an executable that cannot be started 127 (never raises)."""
+        an executable that cannot be started 127. Never raises, except when the caller is interrupted
+        (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the workflow scripts): then the
+        utility's whole process group is stopped first."""
         cmd = list(args)
         if ranks > 1:
             mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
@@ -67,9 +99,7 @@ class _Runner:
             fh.write(f"# {' '.join(cmd)}\n")
             fh.flush()
             try:
-                r = subprocess.run(
-                    cmd, cwd=self.case, env=self.env, stdout=fh, stderr=subprocess.STDOUT, timeout=self.timeout
-                )
+                r = _run_group(cmd, self.case, self.env, fh, self.timeout)
             except subprocess.TimeoutExpired:
                 r = subprocess.CompletedProcess(cmd, returncode=-9)
                 fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
@@ -178,8 +208,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
 
     Steps: blockMesh, snappyHexMesh -overwrite (jet refinement cylinder, wall prism layers),
     checkMesh (failure stops), inlet profile, [decomposePar], simpleFoam start-up (first order)
-    then main stage (residualControl). If SIMPLE does not converge and ``solver.fallback`` is
-    ``transient``: pimpleFoam from the SIMPLE state (adjustable time step at Courant number <=
+    then main stage (residualControl). If SIMPLE does not converge (or diverges: floating point
+    exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
+    written (after a divergence, the start-up's) (adjustable time step at Courant number <=
     ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
     ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
     wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
@@ -320,12 +351,16 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = parse_solver_log(logs[-1])
     status["solver_log"] = _log_summary(main, logs[-1])
+    diverged = None  # SIMPLE's divergence, when the transient fallback takes over from it
     if r.returncode != 0:
-        _collect(case_dir, status, logs, state)
-        return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
+        failure = _solver_failure(logs[-1], "main")
+        if sol.get("fallback") != "transient" or "diverged" not in failure:
+            _collect(case_dir, status, logs, state)
+            return finish(failure, "simpleFoam")
+        diverged = failure  # steady SIMPLE blew up; an unsteady flow may still have a time average
     last = main["rows"][-1] if main["rows"] else {}
     tol = float(sol["tolerance"])
-    if not last and not main["converged_message"]:
+    if diverged is None and not last and not main["converged_message"]:
         # nothing to judge convergence on, and nothing to start a transient run from: say so
         _collect(case_dir, status, logs, state)
         return finish(
@@ -333,16 +368,21 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
             "none with residuals): unrecognised solver output, convergence unknown; fallback not run",
             "simpleFoam",
         )
-    converged = bool(main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
+    converged = diverged is None and bool(
+        main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol)
+    )
     status["converged"] = converged
     status["criterion_used"] = "residualControl" if converged else "none"
     status["fields"] = {"U": "U", "p": "p", "WSS": "wallShearStress", "time_averaged": False}
     transient: dict[str, Any] | None = None
     if not converged:
-        status["reason"] = (
-            f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
-            f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
-        )
+        if diverged is not None:  # the transient starts from the last state SIMPLE wrote (its start-up's)
+            status["reason"] = diverged
+        else:
+            status["reason"] = (
+                f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
+                f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
+            )
         if sol.get("fallback") == "transient":
             transient = _transient_fallback(case_dir, state, status, run, ranks, prof)
     if ranks > 1 and not (transient and transient.get("evaluated")):  # the transient reconstructed its own

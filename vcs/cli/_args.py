@@ -1,6 +1,7 @@
 """Argument helpers shared by the command modules of :mod:`vcs.cli`.
 
-argparse types for integer ranges, the output-path checks (an output directory, never an input
+argparse types for integer ranges, options whose value is a point (``--inlet -40,0,0``: a value
+that starts with a minus sign), the output-path checks (an output directory, never an input
 overwritten) and the JSON writer. Imports nothing from the rest of :mod:`vcs.cli`.
 """
 
@@ -8,7 +9,8 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +51,86 @@ positive_int: Callable[[str], int] = int_at_least(1)
 
 non_negative_int: Callable[[str], int] = int_at_least(0)
 """argparse ``type``: an integer >= 0 (iteration counts)."""
+
+POINT_OPTIONS: set[str] = set()
+"""Option strings registered by :func:`add_point_argument` (their values may start with a minus sign)."""
+
+# a value that starts like a negative number: "-40,0,0", "-.5, 1, 2", "-1e-3,0,0"
+_NEGATIVE_VALUE = re.compile(r"-\s*\.?[0-9]")
+_NUMBER = re.compile(r"[-+]?\s*\.?[0-9]")
+
+
+def add_point_argument(parser: argparse.ArgumentParser, *flags: str, **kwargs: Any) -> argparse.Action:
+    """Add an option that takes a point ``x,y,z`` (or another value that may start with a minus sign).
+
+    argparse reads a value such as ``-40,0,0`` after a space as an unknown option ("expected one
+    argument"); the flags registered here are rewritten to ``--flag=value`` by
+    :func:`join_point_values` before parsing, so ``--inlet -40,0,0`` and ``--inlet=-40,0,0`` both work.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The (sub)parser of the command.
+    *flags : str
+        Option strings, e.g. ``"--inlet"``.
+    **kwargs
+        Passed to :meth:`argparse.ArgumentParser.add_argument`.
+
+    Returns
+    -------
+    argparse.Action
+        The added action.
+    """
+    POINT_OPTIONS.update(f for f in flags if f.startswith("--"))
+    return parser.add_argument(*flags, **kwargs)
+
+
+def join_point_values(argv: Sequence[str]) -> list[str]:
+    """``argv`` with the value of each point option joined to it: ``--flag=VALUE``.
+
+    For flags registered by :func:`add_point_argument`: ``--flag VALUE`` becomes ``--flag=VALUE``
+    when VALUE starts like a negative number (``-40,0,0``, ``-.5,1,2``; leading blanks allowed),
+    which argparse would take for an option; and a point split by the shell at its commas
+    (``--inlet -40, 0, 0`` unquoted: ``-40,`` ``0,`` ``0``) is put back together (a value ending in
+    a comma takes the next argument, at most twice). Everything after ``--`` is left alone.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        Command-line arguments without the program name.
+
+    Returns
+    -------
+    list of str
+        The arguments for :meth:`argparse.ArgumentParser.parse_args`.
+    """
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        if arg == "--":
+            out.extend(argv[i:])
+            break
+        flag, eq, value = arg.partition("=")
+        if flag in POINT_OPTIONS and (eq or i + 1 < len(argv)):
+            if not eq:
+                value = argv[i + 1]
+                if not _NEGATIVE_VALUE.match(value.lstrip()) and not value.rstrip().endswith(","):
+                    out.append(arg)  # an ordinary value: argparse reads it as it is
+                    i += 1
+                    continue
+                i += 1
+            for _ in range(2):  # "-40," "0," "0": the shell split the point at its blanks
+                if not (value.rstrip().endswith(",") and i + 1 < len(argv) and _NUMBER.match(argv[i + 1].lstrip())):
+                    break
+                value += argv[i + 1]
+                i += 1
+            out.append(f"{flag}={value}")
+            i += 1
+            continue
+        out.append(arg)
+        i += 1
+    return out
 
 
 def output_dir(path: PathLike) -> Path:

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from vcs.cli._args import non_negative_int, not_an_input, output_dir, positive_int, write_json
+from vcs.cli._args import add_point_argument, non_negative_int, not_an_input, output_dir, positive_int, write_json
 
 
 def cmd_fit(args: argparse.Namespace) -> None:
@@ -83,6 +83,22 @@ def cmd_fit(args: argparse.Namespace) -> None:
         print(f"warning: {w}", file=sys.stderr)
 
 
+def _knots(text: str) -> int | str:
+    """``--L``: ``auto`` or a positive number of knots.
+
+    Parameters
+    ----------
+    text : str
+        The option's value.
+
+    Returns
+    -------
+    int or str
+        The number, or ``"auto"``.
+    """
+    return "auto" if text.strip().lower() == "auto" else positive_int(text)
+
+
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register `vcs fit` on the subparsers object of the `vcs` parser.
 
@@ -100,12 +116,24 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         choices=["auto", "mm", "cm", "m"],
         help="units of the mesh; auto: largest extent <1 -> m, <25 -> cm, else mm (reported)",
     )
-    f.add_argument("--inlet", help="x,y,z point in or near the inlet end plane (tau = 0), mesh units")
-    f.add_argument("--outlet", help="x,y,z point in or near the outlet end plane (tau = 1), mesh units")
+    add_point_argument(
+        f,
+        "--inlet",
+        metavar="END",
+        help="inlet (tau = 0): a point x,y,z in or near its end plane (mesh units; --inlet -40,0,0 is fine), "
+        "or an end listed by `vcs ends`: end:N (its index) or NAME=VALUE (its cell-array label)",
+    )
+    add_point_argument(f, "--outlet", metavar="END", help="outlet (tau = 1): as --inlet")
     f.add_argument("--inlet-cap", help="surface file of the inlet cap (same units as the mesh)")
     f.add_argument("--outlet-cap", help="surface file of the outlet cap")
     f.add_argument("--cap-array", default="auto", help="cell array labelling caps (auto: ModelFaceID, CapID, ...)")
-    f.add_argument("--L", type=positive_int, default=9, help="centerline interior knots (paper: 9)")
+    f.add_argument(
+        "--L",
+        type=_knots,
+        default="auto",
+        help="centerline interior knots: a number (paper: 9) or auto (default: the smallest L >= 9 "
+        "keeping the centerline inside the lumen and |c'| constant within 2 %%)",
+    )
     f.add_argument("--K", type=positive_int, default=19, help="wall knots in tau (paper: 19)")
     f.add_argument("--R", type=positive_int, default=15, help="wall knots in theta (paper: 15)")
     f.add_argument(

@@ -1,4 +1,4 @@
-"""Command line: `vcs fit|coords|cartesian|wall|grid|phantom|sensitivity`.
+"""Command line: `vcs fit|ends|coords|cartesian|wall|grid|phantom|sensitivity`.
 
 Bad input ends with one line on stderr naming the problem and the fix, and exit code 2.
 """
@@ -11,6 +11,8 @@ import sys
 import warnings
 from collections.abc import Sequence
 
+from vcs.cli._args import join_point_values
+from vcs.cli.ends import add_commands as add_ends_commands
 from vcs.cli.fit import add_commands as add_fit_commands
 from vcs.cli.phantom import add_commands as add_phantom_commands
 from vcs.cli.points import add_commands as add_points_commands
@@ -21,6 +23,7 @@ from vcs.errors import VCSInputError
 # the order of the subcommands in `vcs --help`
 _COMMAND_GROUPS = (
     add_fit_commands,
+    add_ends_commands,
     add_points_commands,
     add_phantom_commands,
     add_wall_commands,
@@ -44,6 +47,24 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Parse `vcs` arguments; a point option's value may start with a minus sign after a space.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    argparse.Namespace
+        As :meth:`argparse.ArgumentParser.parse_args` of :func:`build_parser`, after
+        :func:`vcs.cli._args.join_point_values` (``--inlet -40,0,0`` -> ``--inlet=-40,0,0``).
+    """
+    parser = build_parser()
+    return parser.parse_args(join_point_values(sys.argv[1:] if argv is None else list(argv)))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the `vcs` command line.
 
@@ -59,8 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         1 internal error (one line; with ``-v`` the exception propagates instead). Invalid
         arguments and ``--help`` leave through argparse's ``SystemExit`` (codes 2 and 0).
     """
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_args(argv)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from vcs.cli._args import write_json
+from vcs.errors import VCSInputError
 
 
 def cmd_phantom(args: argparse.Namespace) -> None:
@@ -20,8 +21,10 @@ def cmd_phantom(args: argparse.Namespace) -> None:
     from vcs.phantoms.factory import make_phantom
     from vcs.phantoms.sweep import write_stl
 
-    ph = make_phantom(args.kind, seed=args.seed, resolution=args.resolution)
     out = Path(args.output)
+    if args.params and Path(args.params).resolve() == out.resolve():
+        raise VCSInputError(f"--params '{args.params}' is the output STL; give another file for the parameters")
+    ph = make_phantom(args.kind, seed=args.seed, resolution=args.resolution)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_stl(ph, out)
     if args.params:

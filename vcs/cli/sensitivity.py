@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
+
+from vcs.cli._args import output_dir
 
 
 def cmd_sensitivity(args: argparse.Namespace) -> None:
@@ -27,10 +28,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> None:
     from vcs.sensitivity import parse_range, plot_sweep, residual_sweep
 
     Ls, Ks, Rs = (parse_range(getattr(args, n), n) for n in ("L", "K", "R"))
+    out = output_dir(args.output)  # before the sweep: a bad -o fails at once
     surfaces = [read_surface(m, args.units) for m in args.meshes]
     rows = residual_sweep(surfaces, Ls, Ks, Rs)
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "sensitivity.csv", {k: np.array([r[k] for r in rows]) for k in rows[0]})
     plot_sweep(rows, out / "sensitivity.png")
     best = min(rows, key=lambda r: r["residual_mean_mm"])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
@@ -80,6 +79,9 @@ def cmd_grid(args: argparse.Namespace) -> None:
     from vcs.grid import measurement_grid
     from vcs.vessel import VesselModel
 
+    out = not_an_input(args.output, args.model)
+    if out.suffix.lower() != ".vtu":
+        raise VCSInputError(f"output '{out}' must end in .vtu (a VTK unstructured grid)")
     model = VesselModel.load(args.model)
     g = measurement_grid(model, n_tau=args.n_tau, n_theta=args.n_theta, n_rho=args.n_rho, scheme=args.scheme)
     cells = np.hstack([np.full((len(g.cells), 1), 8), g.cells]).ravel()
@@ -89,7 +91,6 @@ def cmd_grid(args: argparse.Namespace) -> None:
     ug.point_data["tau"] = g.tau
     ug.point_data["theta"] = g.theta
     ug.point_data["rho_n"] = g.rho_n
-    out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     ug.save(str(out))
     print(

@@ -1,13 +1,18 @@
 # Cohort atlas (vcs.atlas): coregistration, shape and flow PCA, shape -> flow regression.
-# Patients excluded by their status.json are listed in atlas.json with the reason.
-# atlas.npz and the VTP/VTU files of vcs.atlas.plots are written beside atlas.json; the PNG
-# figures are also copied to results/atlas/figures/ for `snakemake --report`.
+# A patient that failed at any stage (fit, wall, case set-up, mesh, solve, sampling) ends its chain
+# with a failure record / status.json / placeholder fields instead of a failed job (see
+# workflow/scripts/_failure.py), so the atlas is always built from the others and lists it under
+# patients_excluded with the stage and the reason. atlas.npz and the VTP/VTU files of
+# vcs.atlas.plots are written beside atlas.json, the PNG figures (once) to results/atlas/figures/
+# for `snakemake --report`. Then atlas_complete fails the run, with one line naming every patient
+# left out, unless all of them are in the atlas.
 
 
 rule atlas_build:
     conda:
         "../envs/vcs.yaml"
     input:
+        reports=patient_files("results/patients/{id}/fit/fit_report.json"),
         models=patient_files("results/patients/{id}/fit/model.json"),
         fields=patient_files("results/patients/{id}/fields.npz"),
         statuses=patient_files("results/patients/{id}/status.json"),
@@ -29,3 +34,22 @@ rule atlas_build:
         "results/benchmarks/atlas_build/atlas.tsv"
     script:
         "../scripts/atlas_build.py"
+
+
+rule atlas_complete:
+    # The run's verdict: every patient of the sheet in the atlas (complete.txt), or a failed job
+    # whose one line (on the terminal and in the log) names each patient left out, its stage and
+    # reason. Runs where Snakemake runs (its line goes to the run's own stderr).
+    localrule: True
+    conda:
+        "../envs/vcs.yaml"
+    input:
+        json="results/atlas/atlas.json",
+    output:
+        done="results/atlas/complete.txt",
+    params:
+        ids=PATIENT_IDS,
+    log:
+        "results/logs/atlas_complete/atlas.log",
+    script:
+        "../scripts/atlas_complete.py"

@@ -19,6 +19,10 @@ SHEET_COLUMNS = ("id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_
 
 # The `vcs` console script lives beside this Python (the project's venv): put it on PATH so that
 # shell rules work without an activated venv (also inside SLURM jobs, which run this file again).
+# One BLAS thread per job (set before the jobs start; SLURM jobs run this file again): the jobs
+# already run in parallel, and single-threaded sums are reproducible.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 _VENV_BIN = str(Path(sys.executable).parent)
 if _VENV_BIN not in os.environ.get("PATH", "").split(os.pathsep):
     os.environ.update(PATH=os.pathsep.join([_VENV_BIN, os.environ.get("PATH", "")]))
@@ -62,9 +66,10 @@ def _sheet_rows(path):
     sheet = Path(path)
     if not sheet.is_file():
         fail(f"patients sheet '{path}' not found; set `patients:` in the config to an existing TSV")
+    # utf-8-sig: the byte-order mark of Excel's "UTF-8 CSV" is not part of the header
     lines = [
         (n, line)
-        for n, line in enumerate(sheet.read_text(encoding="utf-8").splitlines(), start=1)
+        for n, line in enumerate(sheet.read_text(encoding="utf-8-sig").splitlines(), start=1)
         if line.strip() and not line.lstrip().startswith("#")
     ]
     if not lines:
@@ -117,7 +122,11 @@ def load_patients(sheet):
             elif "is a dependency of" in msg:
                 msg = f"{msg.split(': ', 1)[-1]}: the ends need both inlet and outlet (points or caps)"
             elif "does not match" in msg:
-                msg = f"{msg.split(':', 1)[0]} '{record[msg.split(':', 1)[0]]}' must be three numbers x,y,z"
+                column = msg.split(":", 1)[0]
+                msg = (
+                    f"{column} '{record[column]}' must be a point x,y,z (mesh units) or an end listed by "
+                    "`vcs ends`: end:N or NAME=VALUE"
+                )
             fail(f"patients sheet '{sheet}' line {n} (id {pid}): {msg}")
         for column in ("mesh", "inlet_cap", "outlet_cap"):
             if column in record:
@@ -149,10 +158,13 @@ def fit_input(wildcards):
 
 
 def fit_ends(wildcards):
-    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic)."""
+    """`vcs fit` options saying how the ends are given (shell quoted; empty = automatic).
+
+    Points are passed as --inlet=VALUE: a value starting with a minus sign (-40,0,0) is then never
+    taken for an option, and shlex.quote keeps spaces ("-40, 0, 0") in one argument."""
     row = PATIENTS[wildcards.id]
     if row["inlet"]:
-        return f"--inlet {shlex.quote(row['inlet'])} --outlet {shlex.quote(row['outlet'])}"
+        return f"--inlet={shlex.quote(row['inlet'])} --outlet={shlex.quote(row['outlet'])}"
     if row["inlet_cap"]:
         return f"--inlet-cap {shlex.quote(row['inlet_cap'])} --outlet-cap {shlex.quote(row['outlet_cap'])}"
     return ""

@@ -1,4 +1,13 @@
 # Geometry: synthetic demo phantoms, the VCS fit (paper Section 2.2) and the Eq. 8 wall STL.
+# A patient whose fit or wall fails does not fail the job: the one-line error stays in the log and
+# every output holds a failure record instead (workflow/scripts/_failure.py), which the later
+# stages pass on and the atlas reads to list the patient as excluded (stage and reason).
+
+# The shell rules call that script as $VCS_FAILURE_SCRIPT (set here, in every Snakemake process, as
+# PATH is in common.smk), so that their commands stay the same wherever the repository is.
+os.environ.update(
+    VCS_FAILURE_SCRIPT=os.path.normpath(os.path.join(workflow.current_basedir, "..", "scripts", "_failure.py"))
+)
 
 
 rule vcs_phantom:
@@ -21,8 +30,9 @@ rule vcs_phantom:
 rule vcs_fit:
     conda:
         "../envs/vcs.yaml"
-    # Centerline B-spline + RMF frame + wall model rho_w of one patient. Bad input (unreadable
-    # mesh, ends not found) fails the job with one line in the log (exit code 2).
+    # Centerline B-spline + RMF frame + wall model rho_w of one patient (L: auto = the knots this
+    # vessel needs; the atlas refits every centerline to the cohort's largest L). Bad input (unreadable
+    # mesh, ends not found): one line in the log and a failure record in every output.
     input:
         unpack(fit_input),
     output:
@@ -45,12 +55,14 @@ rule vcs_fit:
     shell:
         "vcs fit {input.mesh:q} -o {params.outdir:q} --units {params.units} {params.ends}"
         " --L {params.L} --K {params.K} --R {params.R} --recentre {params.recentre} > {log:q} 2>&1"
+        " || python \"$VCS_FAILURE_SCRIPT\" record fit $? --patient {wildcards.id} --log {log:q} -- {output:q}"
 
 
 rule vcs_wall:
     conda:
         "../envs/vcs.yaml"
     # The model wall x(tau, theta) (Eq. 8) as a closed multi-solid STL (wall/inlet/outlet) in metres.
+    # A failed fit is passed on without running; a failed wall check is recorded like a failed fit.
     input:
         model="results/patients/{id}/fit/model.json",
     output:
@@ -65,5 +77,7 @@ rule vcs_wall:
     benchmark:
         "results/benchmarks/vcs_wall/{id}.tsv"
     shell:
-        "vcs wall {input.model:q} -o {output.stl:q} --units m {params.n_tau} --n-theta {params.n_theta}"
+        "python \"$VCS_FAILURE_SCRIPT\" propagate --patient {wildcards.id} --log {log:q} --upstream {input.model:q}"
+        " -- {output:q} || vcs wall {input.model:q} -o {output.stl:q} --units m {params.n_tau} --n-theta {params.n_theta}"
         " --extend-inlet {params.extend_inlet} --extend-outlet {params.extend_outlet} > {log:q} 2>&1"
+        " || python \"$VCS_FAILURE_SCRIPT\" record wall $? --patient {wildcards.id} --log {log:q} -- {output:q}"

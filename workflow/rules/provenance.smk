@@ -1,5 +1,6 @@
 # results/provenance.json: what produced the results (written after every run that executed
-# jobs, successful or not; dry-runs and "nothing to be done" leave it alone).
+# jobs, successful or not; dry-runs and "nothing to be done" leave it alone), and after the same
+# runs the removal of an atlas that no longer matches its patients (drop_stale_atlas).
 
 import datetime
 import importlib.metadata
@@ -88,13 +89,65 @@ def write_provenance(outcome, logfile):
     PROVENANCE_FILE.write_text(json.dumps(record, indent=1, sort_keys=True, default=str) + "\n")
 
 
+# The stale-atlas guard of both handlers below (the atlas itself: workflow/rules/atlas.smk).
+ATLAS_INPUTS = (
+    "results/patients/{id}/fit/fit_report.json",
+    "results/patients/{id}/fit/model.json",
+    "results/patients/{id}/fields.npz",
+    "results/patients/{id}/status.json",
+)
+ATLAS_OUTPUTS = ("results/atlas/atlas.json", "results/atlas/atlas.npz", "results/atlas/figures", "results/atlas/complete.txt")
+
+
+def drop_stale_atlas():
+    """After a run (onsuccess/onerror): remove an atlas that no longer matches its patients.
+
+    When a patient's job failed outright (interrupted, no OpenFOAM, a bug) or a run stopped at a
+    patient's file, the atlas is not rebuilt; the old one would still list that patient as
+    included. If any input of atlas_build is missing or newer than atlas.json, atlas.json,
+    atlas.npz, figures/ and complete.txt are removed (one line on stderr); the next run builds
+    the atlas again. Without atlas.json (atlas_build failed and Snakemake removed its outputs),
+    what is left of an older atlas (complete.txt) goes too.
+    """
+    import shutil
+
+    atlas = Path(ATLAS_OUTPUTS[0])
+    had_atlas = atlas.is_file()
+    if had_atlas:
+        built = atlas.stat().st_mtime
+        stale = [
+            p
+            for pattern in ATLAS_INPUTS
+            for p in patient_files(pattern)
+            if not Path(p).exists() or Path(p).stat().st_mtime > built
+        ]
+    else:  # e.g. atlas_build failed (fewer than 3 patients left): no complete.txt of an old run
+        stale = [str(atlas)] if any(Path(out).exists() for out in ATLAS_OUTPUTS[1:]) else []
+    if not stale:
+        return
+    for out in ATLAS_OUTPUTS:
+        if Path(out).is_dir():
+            shutil.rmtree(out, ignore_errors=True)
+        elif Path(out).exists():
+            Path(out).unlink()
+    more = f" and {len(stale) - 1} more" if len(stale) > 1 else ""
+    why = (
+        f"it no longer matches the patients' results ({stale[0]}{more} missing or newer than atlas.json)"
+        if had_atlas
+        else "what was left of an older atlas (no atlas.json)"
+    )
+    print(f"vcs-atlas: removed the atlas in results/atlas/: {why}; the next run builds it again", file=sys.stderr)
+
+
 onstart:
     _RUN["start"] = datetime.datetime.now(datetime.timezone.utc)
 
 
 onsuccess:
     write_provenance("success", log)
+    drop_stale_atlas()
 
 
 onerror:
     write_provenance("failed", log)
+    drop_stale_atlas()

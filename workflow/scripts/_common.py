@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
 import traceback
 
@@ -20,7 +21,13 @@ def setup(snakemake, name: str) -> logging.Logger:
     logging.basicConfig(
         stream=log_file, level=logging.INFO, force=True, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
+    signal.signal(signal.SIGTERM, _interrupted)  # scancel, or snakemake killing its jobs
     return logging.getLogger(name)
+
+
+def _interrupted(signum, frame):
+    """SIGTERM handler: unwind like Ctrl-C, so that running OpenFOAM process groups are stopped."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def run(main, snakemake, log: logging.Logger) -> None:
@@ -33,6 +40,9 @@ def run(main, snakemake, log: logging.Logger) -> None:
     except (VCSInputError, FileNotFoundError) as exc:  # a plain ValueError is a bug: traceback below
         log.error("%s", " ".join(str(exc).split()))
         sys.exit(2)
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: solvers already stopped by vcs.cfd.run
+        log.error("interrupted (%s): this job's outputs are incomplete and will be recomputed", exc or "SIGINT")
+        sys.exit(130)
     except Exception:  # a bug: keep the traceback
         log.error("internal error\n%s", traceback.format_exc())
         sys.exit(1)

@@ -1,13 +1,16 @@
 """Rule fields_sample: resample a finished case onto the patient's (tau, theta, rho_n) grid.
 
-Cases without a usable solution (failed, or not converged: neither SIMPLE nor a stationary time
-average of the transient fallback) get placeholder outputs that only carry the reason: the atlas
-excludes them from their status anyway. A time-averaged case is sampled from its means (U, p, WSS
-keep their names; TAWSS and OSI are added).
+Cases without a usable solution (failed at any earlier stage, or not converged: neither SIMPLE nor
+a stationary time average of the transient fallback) get placeholder outputs that only carry the
+reason and stage: the atlas excludes them from their status anyway. A case that cannot be
+resampled gets the same placeholder with stage ``sampling`` (a per-patient failure, not a job
+failure), which the atlas reads. A time-averaged case is sampled from its means (U, p, WSS keep
+their names; TAWSS and OSI are added).
 """
 
 import json
 import sys
+import traceback
 
 sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
 import _common  # noqa: E402
@@ -30,10 +33,20 @@ EMPTY_VTU = """<?xml version="1.0"?>
 """
 
 
-def main(smk):
+def placeholder(smk, reason: str, stage: str) -> None:
+    """Outputs that only carry why this patient has no fields (and at which stage)."""
     import numpy as np
 
+    np.savez_compressed(smk.output.npz, excluded=np.array(reason), stage=np.array(stage))
+    with open(smk.output.summary, "w") as fh:
+        json.dump({"excluded": reason, "stage": stage}, fh, indent=1)
+    with open(smk.output.vtu, "w") as fh:
+        fh.write(EMPTY_VTU)
+
+
+def main(smk):
     from vcs.atlas import status_exclusion
+    from vcs.atlas.cohort import status_stage
 
     with open(smk.input.status) as fh:
         status = json.load(fh)
@@ -42,28 +55,30 @@ def main(smk):
     reason = status_exclusion(status, accept_relaxed=True)
     if reason is not None:
         log.warning("%s excluded, not resampled: %s", smk.wildcards.id, reason)
-        np.savez_compressed(smk.output.npz, excluded=np.array(reason))
-        with open(smk.output.summary, "w") as fh:
-            json.dump({"excluded": reason}, fh, indent=1)
-        with open(smk.output.vtu, "w") as fh:
-            fh.write(EMPTY_VTU)
+        placeholder(smk, reason, status_stage(status))
         return
 
     from vcs.cfd import sample_case, write_fields
     from vcs.vessel import VesselModel
 
     grid = dict(smk.params.grid)
-    model = VesselModel.load(smk.input.model)
-    fields = sample_case(
-        smk.input.case,
-        model,
-        n_tau=grid["n_tau"],
-        n_theta=grid["n_theta"],
-        n_rho=grid["n_rho"],
-        rho_scale=1e-3,
-        rho_density=float(smk.params.rho),
-    )
-    write_fields(fields, smk.output.npz, vtu_path=smk.output.vtu)
+    try:
+        model = VesselModel.load(smk.input.model)
+        fields = sample_case(
+            smk.input.case,
+            model,
+            n_tau=grid["n_tau"],
+            n_theta=grid["n_theta"],
+            n_rho=grid["n_rho"],
+            rho_scale=1e-3,
+            rho_density=float(smk.params.rho),
+        )
+        write_fields(fields, smk.output.npz, vtu_path=smk.output.vtu)
+    except Exception as exc:  # this patient's case cannot be resampled: recorded, not a cohort stop
+        log.error("resampling %s failed\n%s", smk.wildcards.id, traceback.format_exc())
+        reason = f"sampling failed: {type(exc).__name__}: {' '.join(str(exc).split())[:400]}"
+        placeholder(smk, reason, "sampling")
+        return
     log.info(
         "%s resampled on %dx%dx%d -> %s",
         smk.wildcards.id,

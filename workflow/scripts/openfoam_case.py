@@ -1,4 +1,9 @@
-"""Rule openfoam_case: render the OpenFOAM case of one patient (vcs.cfd.render_case)."""
+"""Rule openfoam_case: render the OpenFOAM case of one patient (vcs.cfd.render_case).
+
+A wall STL that is a failure record of an earlier stage (workflow/scripts/_failure.py), or a case
+that cannot be set up, is written to SETUP_FAILED.json (stage, reason, log) for openfoam_solve:
+a per-patient failure, not a job failure.
+"""
 
 import json
 import sys
@@ -6,6 +11,7 @@ from pathlib import Path
 
 sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
 import _common  # noqa: E402
+import _failure  # noqa: E402
 
 log = _common.setup(snakemake, "openfoam_case")  # noqa: F821
 SETUP_FAILED = "SETUP_FAILED.json"  # read by openfoam_solve.py
@@ -14,6 +20,14 @@ SETUP_FAILED = "SETUP_FAILED.json"  # read by openfoam_solve.py
 def main(smk):
     from vcs.cfd import render_case
 
+    upstream = _failure.read_record(smk.input.stl)
+    if upstream is not None:  # the fit or the wall failed: pass it on
+        log.warning(
+            "%s: not set up, failed at the %s stage: %s", smk.wildcards.id, upstream["stage"], upstream["reason"]
+        )
+        Path(smk.output.case).mkdir(parents=True, exist_ok=True)
+        (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps(upstream) + "\n")
+        return
     cfd = json.loads(json.dumps(dict(smk.params.cfd)))  # plain dicts/lists
     flavour = cfd.pop("flavour", "auto")
     try:
@@ -23,7 +37,8 @@ def main(smk):
         reason = f"case set-up failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
         log.error("%s: %s", smk.wildcards.id, reason)
         Path(smk.output.case).mkdir(parents=True, exist_ok=True)
-        (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps({"reason": reason}) + "\n")
+        record = {"stage": "case", "reason": reason, "log": str(Path(smk.log[0]).resolve())}
+        (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps(record) + "\n")
         return
     log.info(
         "case for %s (flavour %s): background %s cells of %g m, inside point %s, Q %.4g m3/s -> %s",

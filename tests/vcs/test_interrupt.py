@@ -1,0 +1,86 @@
+"""A solve that is interrupted (timeout, Ctrl-C, SIGTERM from scancel or Snakemake) stops its whole
+OpenFOAM process group: no rank keeps running after the job ended."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from vcs.cfd.run import _Runner
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _alive(pid: int) -> bool:
+    """True while ``pid`` runs (a zombie waiting for its reaper counts as gone)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
+
+
+def _gone(pid: int, within: float = 10.0) -> bool:
+    end = time.monotonic() + within
+    while time.monotonic() < end:
+        if not _alive(pid):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _wait_for(path: Path, within: float = 20.0) -> int:
+    end = time.monotonic() + within
+    while time.monotonic() < end:
+        if path.is_file() and path.read_text().strip():
+            return int(path.read_text())
+        time.sleep(0.05)
+    raise AssertionError(f"{path} never written")
+
+
+# a "solver" whose rank runs in the background, as mpirun's ranks do (ignoring SIGHUP)
+RANK = "nohup sleep 300 >/dev/null 2>&1 & echo $! > rank.pid; wait"
+
+
+def test_timeout_stops_the_whole_process_group(tmp_path):
+    timings: dict[str, float] = {}
+    r = _Runner(tmp_path, timings, timeout=1.0)(["sh", "-c", RANK], "fake")
+    assert r.returncode == -9
+    assert "timeout after 1.0 s" in (tmp_path / "logs" / "log.fake").read_text()
+    assert _gone(int((tmp_path / "rank.pid").read_text())), "the background rank survived the timeout"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_to_a_workflow_job_stops_its_solver(tmp_path, sig):
+    """A workflow script (workflow/scripts/_common.py) that gets SIGTERM (scancel) or SIGINT exits
+    130 with one line in its log, and its running utility's process group is gone."""
+    log = tmp_path / "job.log"
+    script = textwrap.dedent(
+        f"""
+        import sys, types
+        sys.path.insert(0, {str(ROOT / "workflow" / "scripts")!r})
+        import _common
+        from pathlib import Path
+        from vcs.cfd.run import _Runner
+        smk = types.SimpleNamespace(log=[{str(log)!r}])
+        log = _common.setup(smk, "test")
+        def main(smk):
+            _Runner(Path({str(tmp_path)!r}), {{}}, timeout=None)(["sh", "-c", {RANK!r}], "solver")
+        _common.run(main, smk, log)
+        """
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", script], env=env)
+    rank = _wait_for(tmp_path / "rank.pid")
+    proc.send_signal(sig)
+    assert proc.wait(timeout=30) == 130
+    assert _gone(rank), "the solver's rank kept running after its job was interrupted"
+    text = log.read_text()
+    assert "interrupted" in text and "Traceback" not in text, text
