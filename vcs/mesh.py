@@ -823,3 +823,45 @@ def write_points_vtp(path: str | Path, points: ArrayLike, point_data: dict[str, 
     for name, values in (point_data or {}).items():
         poly.point_data[name] = np.asarray(values)
     poly.save(str(path))
+
+
+def plane_section(
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    p: NDArray[np.floating],
+    n: NDArray[np.floating],
+    r_max: float,
+) -> tuple[NDArray[np.floating] | None, float | None]:
+    """Centroid and equivalent radius of the wall's cut by the plane (p, n), within r_max of p.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float, mm
+    faces : (M, 3) int
+    p : (3,) float, mm
+        A point of the plane.
+    n : (3,) float
+        Unit normal of the plane.
+    r_max : float, mm
+        Only crossings within this distance of ``p`` count.
+
+    Returns
+    -------
+    center : (3,) float, mm, or None
+        Mean of the edge crossings (None when fewer than 3).
+    radius : float, mm, or None
+        Median distance of the crossings to ``center``.
+    """
+    sd = (vertices - p) @ n
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    a, b = sd[e[:, 0]], sd[e[:, 1]]
+    cross = (a * b) < 0
+    ea, eb = e[cross, 0], e[cross, 1]
+    w = (a[cross] / (a[cross] - b[cross]))[:, None]
+    on = np.abs(sd) <= 1e-9 * max(float(np.ptp(vertices)), 1.0)  # vertices lying in the plane
+    x = np.vstack([vertices[ea] + w * (vertices[eb] - vertices[ea]), vertices[np.unique(faces)[on[np.unique(faces)]]]])
+    x = x[np.linalg.norm(x - p, axis=1) < r_max]
+    if len(x) < 3:
+        return None, None
+    c = x.mean(axis=0)
+    return c, float(np.median(np.linalg.norm(x - c, axis=1)))

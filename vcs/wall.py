@@ -476,7 +476,12 @@ def fit_wall(
         ok = np.isfinite(med)
         return np.interp(np.arange(n_bins), np.flatnonzero(ok), med[ok]) if ok.any() else med
 
-    anchors = _end_sections(vcs, vertices, faces, float(np.nanmedian(rho[reason == 0])))
+    kept_tau = np.nan_to_num(tau[reason == 0])
+    end_radii = [
+        float(np.median(rho[reason == 0][near])) if near.sum() >= 8 else float(np.nanmedian(rho[reason == 0]))
+        for near in (kept_tau < 0.02, kept_tau > 0.98)
+    ]
+    anchors = _end_sections(vcs, vertices, faces, float(np.nanmedian(rho[reason == 0])), end_radii)
     w_anchor = float(np.median(w[reason == 0]))
 
     def fit() -> WallModel:
@@ -577,7 +582,11 @@ def _regions_with_seeds(
 
 
 def _end_sections(
-    vcs: VesselCoordinateSystem, vertices: NDArray[np.floating], faces: NDArray[np.integer], radius: float
+    vcs: VesselCoordinateSystem,
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    radius: float,
+    end_radii: tuple[float, float] | list[float] | None = None,
 ) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]:
     """(tau, theta, rho) of the wall's cuts by the two end planes (paper Section 2.2.1 end planes).
 
@@ -593,6 +602,9 @@ def _end_sections(
         Wall triangles.
     radius : float, mm
         Typical lumen radius (search radius around the end centres).
+    end_radii : (2,) float, mm, or None
+        Median radius of the wall just inside each end: crossings beyond 1.5 times it are not
+        the section's ring (None: no such limit).
 
     Returns
     -------
@@ -602,7 +614,7 @@ def _end_sections(
     out: list[list[float]] = [[], [], []]
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     e = np.unique(np.sort(e, axis=1), axis=0)
-    for t_end in (0.0, 1.0):
+    for t_end, r_end in zip((0.0, 1.0), end_radii if end_radii is not None else (np.inf, np.inf)):
         t, v1, v2 = (a[0] for a in vcs.frame(np.array([t_end])))
         c = vcs.curve(t_end)
         sd = (vertices - c) @ t
@@ -611,7 +623,18 @@ def _end_sections(
         wgt = (a[cross] / (a[cross] - bb[cross]))[:, None]
         x = vertices[e[cross, 0]] + wgt * (vertices[e[cross, 1]] - vertices[e[cross, 0]]) - c
         x = x[np.linalg.norm(x, axis=1) < 2.5 * radius]
-        out[0].extend([t_end] * len(x))
-        out[1].extend(np.mod(np.arctan2(x @ v2, x @ v1), TWO_PI))
-        out[2].extend(np.linalg.norm(x, axis=1))
+        th = np.mod(np.arctan2(x @ v2, x @ v1), TWO_PI)
+        rho = np.linalg.norm(x, axis=1)
+        # the section's own ring only: the plane may also cut another part of the vessel within
+        # 2.5 radii (the ascending aorta next to a descending outlet: anchors at 40 mm pulled
+        # rho_w to 41 mm at the outlet of a 17 mm aorta phantom); crossings beyond 1.5 times the
+        # wall's radius just inside the end, or, per 10 deg sector, beyond 1.3 times the nearest
+        # crossing, are that other wall (the ring of an open end lying in the plane has none)
+        sector = np.minimum((th / (TWO_PI / 36)).astype(int), 35)
+        nearest = np.full(36, np.inf)
+        np.minimum.at(nearest, sector, rho)
+        keep = (rho <= 1.3 * nearest[sector]) & (rho <= 1.5 * r_end)
+        out[0].extend([t_end] * int(keep.sum()))
+        out[1].extend(th[keep])
+        out[2].extend(rho[keep])
     return np.array(out[0]), np.array(out[1]), np.array(out[2])
