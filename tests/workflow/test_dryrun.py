@@ -315,6 +315,50 @@ def test_bad_config_value_fails_with_one_line(cohort):
     assert "cfd > ranks" in msg and "minimum of 1" in msg
 
 
+@pytest.mark.parametrize(
+    ("keys", "value"),
+    [
+        (("cfd", "solver", "div_scheme"), 'linearUpwind grad(U); #codeStream { code #{ system("id"); #}; }'),
+        (("cfd", "solver", "startup_scheme"), "upwind;\nfunctions {}"),
+        (("cfd", "decomposition", "method"), "scotch"),
+    ],
+)
+def test_config_text_for_openfoam_dictionaries_is_refused_unless_listed(cohort, keys, value):
+    """A config string is written into system/fvSchemes etc.: anything but a listed word stops the
+    run with one line before any dictionary is written (no #codeStream injection)."""
+    cohort.update_config(*keys, value)
+    msg = _one_line_error(cohort)
+    assert " > ".join(keys) in msg and "is not one of" in msg, msg
+
+
+def test_every_config_string_is_an_enum_or_a_pattern():
+    """Every string of the config schema is constrained (enum or pattern), except the sheet's path,
+    which never reaches an OpenFOAM dictionary."""
+    import yaml
+
+    schema = yaml.safe_load((Path(__file__).resolve().parents[2] / "workflow/schemas/config.schema.yaml").read_text())
+    free = []
+
+    def walk(node, path):
+        if not isinstance(node, dict):
+            return
+        types = node.get("type") if isinstance(node.get("type"), list) else [node.get("type")]
+        if "string" in types and "enum" not in node and "pattern" not in node:
+            free.append(path)
+        for key, value in node.items():
+            if key == "properties":
+                for name, sub in value.items():
+                    walk(sub, f"{path}/{name}")
+            elif key in ("oneOf", "anyOf", "allOf"):
+                for sub in value:
+                    walk(sub, path)
+            elif key in ("items", "additionalProperties"):
+                walk(value, f"{path}/{key}")
+
+    walk(schema, "")
+    assert free == ["/patients"], free
+
+
 def test_unknown_config_key_fails_with_one_line(cohort):
     cohort.update_config("cfd", "mesh", "cellsize", 1.0)
     assert "'cellsize' was unexpected" in _one_line_error(cohort)
