@@ -5,7 +5,9 @@
                               [--inlet jet|uniform|parabolic] [--max-iterations 2000] [--set solver.relax_U=0.7]
     python bench/bench_cfd.py --demo-tube      # synthetic 20 mm x 0.2 m tube (jet inlet, paper defaults)
 
-Prints one row per STL: cells, snappyHexMesh time, solver iterations and time, converged (+ reason).
+Prints one row per STL: cells, snappyHexMesh time, SIMPLE iterations, solver time (simpleFoam and
+the transient fallback's pimpleFoam), converged (+ reason); for a transient fallback also its time
+steps, window and half-window differences.
 Cases are kept in --workdir (default: a temporary directory) with their status.json and logs/.
 """
 
@@ -84,7 +86,7 @@ def main(argv=None) -> int:
         render_case(case, stl, cfg, flavour=a.flavour)
         st = run_case(case, ranks=a.ranks)
         t = st.get("timings_s", {})
-        solver_s = sum(v for k, v in t.items() if k.startswith("simpleFoam"))
+        solver_s = sum(v for k, v in t.items() if k.startswith(("simpleFoam", "pimpleFoam")))
         cells = st.get("cells")
         print(
             f"{Path(stl).stem[:24]:<24} {cells if cells is not None else '-':>9} {t.get('snappyHexMesh', 0):>9.1f} "
@@ -92,6 +94,17 @@ def main(argv=None) -> int:
             f"{str(st.get('converged')):>9}  {st.get('reason') or ''}",
             flush=True,
         )
+        tr = st.get("transient")
+        if tr and tr.get("evaluated"):  # the transient fallback ran: its window and verdict
+            d = tr["half_window_differences"]
+            print(
+                f"{'':<24} transient: {sum(tr['time_steps'].values())} steps (Co max {tr['courant_max']:.3g}), "
+                f"window {tr['window_s']:.4g} s = {tr['window_flow_throughs']:.3g} flow-throughs after "
+                f"{tr['washout_s']:.3g} s wash-out; half-window differences "
+                f"dp {100 * d['inlet_minus_outlet_pressure']:.2g} %, "
+                f"TAWSS {100 * d['tawss_mean']:.2g} %, U {100 * d['U_L2']:.2g} %; stationary {tr['stationary']}",
+                flush=True,
+            )
         out.append(st)
     if a.json:
         a.json.write_text(json.dumps(out, indent=2, default=float))

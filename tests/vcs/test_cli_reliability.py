@@ -452,3 +452,29 @@ def test_successful_runs_leave_no_temporary_files(fitted, tmp_path):
     names = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
     assert not [n for n in names if ".tmp" in n or Path(n).name.startswith(".")], names
     assert {"c.csv", "e.json", "f/model.json", "g.vtu", "t.json", "t.stl", "w.stl", "x.csv"} <= set(names)
+
+
+def test_ctrl_c_during_a_fit_leaves_nothing_half_done(tmp_path):
+    """SIGINT once `vcs fit` has created its (new) output folder, i.e. while it fits: exit 130, one
+    line, and the folder is gone again (no temporary file, no partial fit)."""
+    import signal
+    import time
+
+    from vcs.phantoms import make_phantom, write_stl
+
+    write_stl(make_phantom("aorta", seed=0, resolution=1.0), tmp_path / "aorta.stl")  # ~1-2 s to fit
+    out = tmp_path / "fit"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "vcs.cli", "fit", str(tmp_path / "aorta.stl"), "-o", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not out.exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    r = subprocess.CompletedProcess(p.args, p.returncode, "", err)
+    one_line_error(r, "vcs fit: interrupted", code=130)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["aorta.stl"]

@@ -195,6 +195,38 @@ def test_time_line_units(tmp_path, line, time, unit):
     assert out["rows"][0]["p"] == 0.5 and out["time_unit"] == unit and out["ended"]
 
 
+def v10_pimple_log(start: float = 20.0, steps: int = 4) -> str:
+    """A transient stage of OpenFOAM-10's pimpleFoam restarted at ``start``.
+
+    pimpleFoam.C: CourantNo.H ("Courant Number mean: ... max: ...",
+    src/finiteVolume/cfdTools/incompressible/CourantNo.H) and setInitialDeltaT.H before the time
+    loop (the restart's time step, no deltaT line); in the loop CourantNo.H, setDeltaT.H
+    ("deltaT = ...", src/finiteVolume/cfdTools/general/include/setDeltaT.H), then "Time = " +
+    runTime.userTimeName() (unit "s"), the solver lines, ExecutionTime/ClockTime; "End".
+    """
+    parts = [V10_HEADER.replace("Create mesh for time = 100", f"Create mesh for time = {start:g}")]
+    parts.append("Courant Number mean: 50.1 max: 2500.5\n\nStarting time loop\n\n")
+    t, dt = start, 4e-4
+    for i in range(steps):
+        dt *= 1.1 if i else 1.0
+        t += dt
+        parts.append(f"Courant Number mean: 0.08 max: {0.9 + 0.02 * i:.3f}\ndeltaT = {dt:.10g}\n")
+        parts.append(_v10_iteration(0, 1e-3, 1e-6).replace("Time = 0s", f"Time = {t:.10g}s"))
+    parts.append("End\n\n")
+    return "".join(parts)
+
+
+def test_v10_pimple_log_courant_and_time_steps(tmp_path):
+    log = tmp_path / "log.pimpleFoam.average"
+    log.write_text(v10_pimple_log())
+    out = parse_solver_log(log)
+    assert out["time_unit"] == "s" and len(out["rows"]) == 4 and out["ended"]
+    assert out["rows"][0]["time"] == pytest.approx(20.0004) and out["rows"][-1]["p"] == pytest.approx(0.8e-3)
+    # the Courant number before the loop is the restart's time step (none was taken with it)
+    assert out["courant_max"] == pytest.approx(0.96)
+    assert out["delta_t_min"] == pytest.approx(4e-4) and out["delta_t_max"] == pytest.approx(4e-4 * 1.1**3)
+
+
 def test_banner_time_line_is_not_an_iteration(tmp_path):
     # argList.C prints "Time   : 15:22:46" in the header: not a solver time line
     log = tmp_path / "log"
@@ -411,14 +443,14 @@ for line in sys.stdin:
 """
 
 
-def _wrap_solver(bindir: Path, mode: str = "v10") -> Path:
-    """A ``simpleFoam`` in ``bindir`` that runs the real one and rewrites its output (mode
-    ``"v10"``: as OpenFOAM-10 prints it; ``"garble"``: v10 without any time line)."""
+def _wrap_solver(bindir: Path, mode: str = "v10", solver: str = "simpleFoam") -> Path:
+    """A ``solver`` (simpleFoam, pimpleFoam) in ``bindir`` that runs the real one and rewrites its
+    output (mode ``"v10"``: as OpenFOAM-10 prints it; ``"garble"``: v10 without any time line)."""
     bindir.mkdir(parents=True, exist_ok=True)
     filt = bindir / "v10filter.py"
     filt.write_text(FILTER)
-    w = bindir / "simpleFoam"
-    pipe = f'"{REAL_SIMPLEFOAM}" "$@" 2>&1 | "{sys.executable}" -u "{filt}" {mode}'
+    w = bindir / solver
+    pipe = f'"{shutil.which(solver)}" "$@" 2>&1 | "{sys.executable}" -u "{filt}" {mode}'
     w.write_text(f'#!/bin/bash\n{pipe}\nexit "${{PIPESTATUS[0]}}"\n')
     w.chmod(0o755)
     return w
@@ -426,9 +458,9 @@ def _wrap_solver(bindir: Path, mode: str = "v10") -> Path:
 
 TINY_AXIS = np.array([0.3, 0.2, 1.0])  # tilted: no axis-aligned round-off residual floor
 TINY_CFG = {
-    "mesh": {"cell_size": 0.6e-3},  # ~5,500 cells
+    "mesh": {"cell_size": 0.6e-3},  # ~9,400 cells (3 prism layers, the default; ~5,500 without)
     "inlet": {"type": "parabolic", "flow_rate": 2.0e-6},  # Re ~ 95
-    "solver": {"max_iterations": 400, "startup_iterations": 10},  # fallback: average (default)
+    "solver": {"max_iterations": 400, "startup_iterations": 10},  # fallback: transient (default)
 }
 
 
@@ -506,17 +538,34 @@ def test_v10_wrapped_solver_parallel(tiny_tube, v10_solver, tmp_path):
 
 @pytest.mark.openfoam
 @needs_foam
-def test_v10_wrapped_fallback_not_converged(tiny_tube, v10_solver, tmp_path):
-    cfg = {**TINY_CFG, "solver": {"max_iterations": 20, "startup_iterations": 5, "average_iterations": 10}}
-    case = tmp_path / "v10fb"
+def test_v10_wrapped_transient_fallback(tiny_tube, v10_solver, tmp_path):
+    """SIMPLE stopped early, then the transient fallback with a pimpleFoam that prints as
+    OpenFOAM-10 (``Time = 20.0123s``; pimpleFoam.C prints runTime.userTimeName() too): the time
+    steps are read, the window is judged, the laminar tube flow is stationary."""
+    _wrap_solver(v10_solver, solver="pimpleFoam")
+    cfg = {
+        **TINY_CFG,
+        "solver": {
+            "max_iterations": 20,
+            "startup_iterations": 5,
+            "fallback": "transient",
+            "transient": {"flow_throughs": 0.2, "washout_flow_throughs": 0.1},
+        },
+    }
+    case = tmp_path / "v10tr"
     render_case(case, tiny_tube, cfg, flavour="esi")
-    st = run_case(case, ranks=1)  # fallback: average (default); must not raise
-    assert st["converged"] is False and "did not reach" in st["reason"] and "fallback" in st["reason"]
-    assert st["criterion_used"] == "pseudo_steady_time_average" and st["averaging_from"] == 20
-    assert st["iterations"] == 30 and st["stage_iterations"]["simpleFoam.average"] == 10
-    assert isinstance(st["converged_relaxed"], bool) and st["averaging"]["max_initial_residual"] > 0
-    assert (case / "30" / "U.instantaneous").exists()
-    assert json.loads((case / "status.json").read_text())["reason"] == st["reason"]
+    st = run_case(case, ranks=1)  # must not raise
+    log = (case / "logs" / "log.pimpleFoam.average").read_text()
+    assert re.search(r"^Time = 20\.[0-9]+s$", log, re.M) and "Version:  10" in log
+    assert st["iterations"] == 20 and "did not reach" in st["transient"]["steady_not_converged"]
+    tr = st["transient"]
+    assert tr["solver_log"]["time_unit"] == "s" and tr["solver_log"]["ended"]
+    assert tr["time_steps"]["washout"] > 5 and tr["time_steps"]["average"] > 5
+    assert tr["courant_max"] is not None and tr["courant_max"] <= 1.05
+    assert tr["evaluated"] and st["criterion_used"] == "time_average_stationary"
+    assert st["converged"] is True and st["reason"] is None, st["reason"]
+    assert tr["window_flow_throughs"] >= 0.2 and float(tr["end_time_folder"]) == pytest.approx(tr["end_time"])
+    assert json.loads((case / "status.json").read_text())["converged"] is True
 
 
 @pytest.mark.openfoam
@@ -536,7 +585,7 @@ def test_unreadable_solver_log_never_raises(tiny_tube, tmp_path, monkeypatch):
     finally:
         openfoam_installation.cache_clear()
     assert st["converged"] is False and "no SIMPLE iteration could be read" in st["reason"]
-    assert not (case / "logs" / "log.simpleFoam.average").exists()
+    assert not list((case / "logs").glob("log.pimpleFoam*")) and "transient" not in st
     assert st["pyfoam_log_analysis"]["last_iteration"] is None and "note" in st["pyfoam_log_analysis"]
 
 

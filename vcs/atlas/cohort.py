@@ -57,19 +57,21 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     """Reason to exclude a patient from its case ``status.json`` (None: include).
 
     Excluded when the file is missing, ``failed`` is true, ``status``/``state`` names a failure,
-    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``). With
-    ``accept_relaxed``, a case whose SIMPLE run did not converge but whose time-averaged fallback
-    met the relaxed criterion (``converged_relaxed`` true) is included. The reason quotes the
+    or ``converged`` is false (vcs.cfd.run_case writes ``converged`` and ``reason``; a stationary
+    time average of its transient fallback is ``converged`` true). With ``accept_relaxed``, a
+    legacy status of the removed SIMPLE-iterate averaging with ``converged_relaxed`` true is
+    included (new runs never write it). The reason quotes the
     status's own ``reason``/``error``/``message``; a failure recorded before the solver (a status
-    whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those) is its reason
-    as is.
+    whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those), or a mesh
+    that stopped the patient before the solver (``stage`` ``mesh``, ``mesh_ok`` false: an end lost
+    in meshing, a leak), is its reason as is.
 
     Parameters
     ----------
     status : mapping or None
         The parsed status.json; None when the file is missing.
     accept_relaxed : bool
-        Include cases that met only the relaxed (time-averaged) convergence criterion.
+        Include legacy statuses that met only the relaxed criterion (``converged_relaxed``).
 
     Returns
     -------
@@ -83,6 +85,8 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     failed = status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout")
     if failed and status.get("stage") in ("fit", "wall", "case") and detail:
         return detail
+    if status.get("stage") == "mesh" and status.get("mesh_ok") is False and detail:
+        return detail  # run_case's patch check: already what happened, in words
     detail = f": {detail}" if detail else ""
     if failed:
         return f"solver failed ({state or 'failed'}){detail}"
@@ -267,7 +271,7 @@ def compute_atlas(
     shape_block : {"all", "wall", "centerline"}
         Which part of the feature vector the shape PCA varies (:func:`vcs.atlas.pca.shape_matrix`).
     accept_relaxed : bool
-        Include time-averaged cases that met the relaxed criterion (:func:`status_exclusion`).
+        Include legacy statuses that met only the relaxed criterion (:func:`status_exclusion`).
 
     Returns
     -------

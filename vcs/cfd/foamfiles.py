@@ -3,7 +3,9 @@
 * ASCII ``constant/polyMesh`` reader for boundary patches (face centres / area vectors)
 * solver-log parser (initial residuals, continuity errors, convergence message, time units of
   openfoam.org 10+) and banner parser (both families, solver logs and ``-help``)
-* ``postProcessing/*/*.dat`` reader (surfaceFieldValue output)
+* ``postProcessing/*/*.dat`` reader (surfaceFieldValue output), time-weighted window means
+* ASCII field readers (internalField, a patch's value), snappyHexMesh's prism-layer report,
+  checkMesh's volume, and the oscillatory shear index of time-averaged wall shear stress
 """
 
 from __future__ import annotations
@@ -218,7 +220,11 @@ def patch_geometry(case_dir: Path | str, patch: str) -> tuple[NDArray[np.floatin
 #   src/finiteVolume/cfdTools/general/solutionControl/convergenceControl/convergenceControl/
 #   convergenceControl.C, converged(): algorithmName() + " solution converged in " +
 #   time().timeName() + " iterations" -- timeName(), so no unit here; ESI v1912 prints the same).
-# * "ExecutionTime = 4.02 s  ClockTime = 4 s" and the final "End" (simpleFoam.C).
+# * "ExecutionTime = 4.02 s  ClockTime = 4 s" and the final "End" (simpleFoam.C, pimpleFoam.C).
+# * transient (pimpleFoam): "Courant Number mean: 0.01 max: 0.98" (src/finiteVolume/cfdTools/
+#   incompressible/CourantNo.H) and "deltaT = 0.0004" (src/finiteVolume/cfdTools/general/include/
+#   setDeltaT.H), both printed before the step's time line (once more before the time loop,
+#   with the restart's time step); the same text in both families.
 # * banner of a solver log: openfoam.org 10 (src/OpenFOAM/db/IOobject/IOobjectI.H writeBanner,
 #   argList.C): "   \\    /   O peration     | Website:  https://openfoam.org",
 #   "    \\  /    A nd           | Version:  10", "Build  : 10-c4cf895ad8fa"; ESI:
@@ -244,6 +250,8 @@ _CONV_RE = re.compile(
 )
 _CONV_ITER_RE = re.compile(rf"solution converged in\s+({_FLOAT})\s*[A-Za-z]*\s+iterations", re.I)
 _EXEC_RE = re.compile(rf"^ExecutionTime = ({_FLOAT}) s\s+ClockTime = ({_FLOAT}) s")
+_COURANT_RE = re.compile(rf"^Courant Number mean: ({_FLOAT}) max: ({_FLOAT})")
+_DELTAT_RE = re.compile(rf"^deltaT = ({_FLOAT})")
 _USING_ORG_RE = re.compile(r"Using:\s*OpenFOAM-(\S*)\s*\(see\s+(?:https?://)?(?:www\.)?openfoam\.org\)")
 _USING_COM_RE = re.compile(r"Using:\s*OpenFOAM-(\S*)\s*\((\d+)\)\s*-?\s*visit\s+(?:https?://)?www\.openfoam\.com")
 _BUILD_RE = re.compile(r"^Build\s*:[ \t]*([^\n]*?)[ \t]*$", re.M)
@@ -338,7 +346,8 @@ def parse_banner(text: str) -> dict[str, Any]:
 
 
 def parse_solver_log(path: str | Path) -> dict[str, Any]:
-    """Parse a simpleFoam log: initial residuals, continuity errors and convergence, per iteration.
+    """Parse a simpleFoam/pimpleFoam log: initial residuals, continuity errors and convergence, per
+    iteration or time step; Courant numbers and time steps of a transient run.
 
     Initial residuals are those of the first solve per field and iteration (non-orthogonal
     correctors ignored); vectors give the max over components, as OpenFOAM's residualControl
@@ -362,8 +371,11 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
         ``time_unit``: the unit of the time lines (``"s"``, ``"CAD"``; ``""`` without one, None
         when no time line was read); ``time_lines``: number of time lines read; ``ended``:
         whether the solver printed its final ``End``; ``execution_time_s``, ``clock_time_s``:
-        last ExecutionTime / ClockTime (s) or None; ``banner``: :func:`parse_banner` of the
-        log's header.
+        last ExecutionTime / ClockTime (s) or None; ``courant_max``: the largest maximum
+        Courant number printed after the first time step (transient solvers: the Courant
+        numbers of the steps taken) or None; ``delta_t_min``, ``delta_t_max``:
+        the range of the printed adjustable time steps (s) or None; ``banner``:
+        :func:`parse_banner` of the log's header.
     """
     rows: list[dict[str, Any]] = []
     cur: dict[str, Any] | None = None
@@ -374,6 +386,8 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
     ended = False
     exec_s: float | None = None
     clock_s: float | None = None
+    co_max: float | None = None
+    dts: list[float] = []
     head: list[str] = []
     with open(path, errors="replace") as fh:
         for line in fh:
@@ -394,6 +408,15 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
             m = _EXEC_RE.match(s)
             if m:
                 exec_s, clock_s = float(m.group(1)), float(m.group(2))
+                continue
+            m = _COURANT_RE.match(s)
+            if m:
+                if n_time:  # before the first step it is the restart's time step, not one taken
+                    co_max = max(co_max or 0.0, float(m.group(2)))
+                continue
+            m = _DELTAT_RE.match(s)
+            if m:
+                dts.append(float(m.group(1)))
                 continue
             if _CONV_RE.search(line):
                 converged_msg = True
@@ -428,6 +451,9 @@ def parse_solver_log(path: str | Path) -> dict[str, Any]:
         "ended": ended,
         "execution_time_s": exec_s,
         "clock_time_s": clock_s,
+        "courant_max": co_max,
+        "delta_t_min": min(dts) if dts else None,
+        "delta_t_max": max(dts) if dts else None,
         "banner": parse_banner("\n".join(head)),
     }
 
@@ -489,31 +515,243 @@ def last_function_value(case_dir: Path | str, name: str) -> float | None:
     return None
 
 
-def mean_function_value(case_dir: Path | str, name: str, after: float) -> float | None:
-    """Mean value written by a function object after a given time (the fallback's averaging window).
+def function_series(case_dir: Path | str, name: str) -> NDArray[np.floating]:
+    """Time series (time, value) written by a function object, over all its start-time folders.
 
     Parameters
     ----------
     case_dir : Path or str
         The OpenFOAM case.
     name : str
-        Function-object name (``postProcessing/<name>/*/*.dat``).
-    after : float
-        Only rows with time (iteration) > ``after`` count.
+        Function-object name (``postProcessing/<name>/<start time>/*.dat``).
+
+    Returns
+    -------
+    (n, 2) float
+        Rows sorted by time (the function's units, e.g. m^3/s, m^2/s^2); where a restarted stage
+        wrote a time twice, the row of the later start folder is kept. (0, 2) when nothing was
+        written.
+    """
+    root = Path(case_dir) / "postProcessing" / name
+    files = sorted(root.glob("*/*.dat"), key=lambda p: (float(p.parent.name) if _isnum(p.parent.name) else 0.0, p.name))
+    rows: dict[float, float] = {}
+    for f in files:
+        arr = read_dat(f)
+        if arr.shape[0] and arr.shape[1] >= 2:
+            rows.update({float(t): float(v) for t, v in arr[:, :2]})
+    if not rows:
+        return np.zeros((0, 2))
+    t = np.array(sorted(rows))
+    return np.column_stack([t, [rows[x] for x in t]])
+
+
+def window_mean(case_dir: Path | str, name: str, start: float, end: float) -> float | None:
+    """Time-weighted mean of a function object's values over the time window (start, end].
+
+    Each row (t_i, v_i) stands for the time step ending at t_i, so it weighs
+    t_i - max(t_{i-1}, start); the weights sum to the covered part of the window. This is the
+    average fieldAverage forms with ``base time``.
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        The OpenFOAM case.
+    name : str
+        Function-object name.
+    start, end : float
+        The window, in solver time (s).
 
     Returns
     -------
     float or None
-        Mean of the second column (the function's units); None when no row qualifies.
+        The mean (the function's units); None when no row lies in the window.
     """
-    root = Path(case_dir) / "postProcessing" / name
-    rows = [read_dat(f) for f in root.glob("*/*.dat")]
-    rows = [r for r in rows if r.shape[0] and r.shape[1] >= 2]
-    if not rows:
+    arr = function_series(case_dir, name)
+    if not arr.shape[0]:
         return None
-    arr = np.concatenate([r[:, :2] for r in rows])
-    sel = arr[arr[:, 0] > after]
-    return float(sel[:, 1].mean()) if sel.shape[0] else None
+    t, v = arr[:, 0], arr[:, 1]
+    prev = np.concatenate([[-np.inf], t[:-1]])
+    eps = 1e-9 * max(abs(end), 1.0)
+    sel = (t > start + eps) & (t <= end + eps)
+    if not sel.any():
+        return None
+    w = t[sel] - np.maximum(prev[sel], start)
+    return float((v[sel] * w).sum() / w.sum()) if w.sum() > 0 else float(v[sel].mean())
+
+
+# ------------------------------------------------------------------ field files (ascii)
+
+
+def _field_text(path: Path | str) -> str:
+    """Text of an ASCII field file, header and comments stripped (VCSInputError for binary)."""
+    return _read_text(Path(path))
+
+
+def _parse_values(body: str, n: int, width: int) -> NDArray[np.floating]:
+    """The first ``n`` values (``width`` numbers each) of a list body."""
+    nums = np.array(re.findall(_FLOAT, body.replace("(", " ").replace(")", " ")), dtype=float)
+    if nums.size < n * width:
+        raise VCSInputError(f"field list holds {nums.size} numbers, expected {n * width}")
+    vals = nums[: n * width]
+    return vals.reshape(n, width) if width > 1 else vals
+
+
+def _value_entry(text: str, n_default: int | None) -> NDArray[np.floating]:
+    """Values of a ``uniform x`` / ``nonuniform List<...> N (...)`` entry at the start of ``text``."""
+    m = re.match(r"\s*uniform\s+(\([^)]*\)|\S+?)\s*;", text)
+    if m:
+        v = np.array([float(x) for x in m.group(1).strip("()").split()])
+        n = n_default if n_default is not None else 1
+        return np.repeat(v[None, :], n, axis=0) if v.size > 1 else np.full(n, float(v[0]))
+    m = re.match(r"\s*nonuniform\s+List<(\w+)>\s*(\d+)\s*\(", text)
+    if not m:
+        raise VCSInputError("field entry is neither uniform nor a nonuniform List")
+    width = {"scalar": 1, "vector": 3, "symmTensor": 6, "tensor": 9}.get(m.group(1))
+    if width is None:
+        raise VCSInputError(f"unsupported field type List<{m.group(1)}>")
+    n = int(m.group(2))
+    end = text.find(";", m.end())
+    return _parse_values(text[m.end() : end if end > 0 else None], n, width)
+
+
+def read_internal_field(path: Path | str, n_cells: int | None = None) -> NDArray[np.floating]:
+    """The ``internalField`` values of an ASCII OpenFOAM volume field file.
+
+    Parameters
+    ----------
+    path : Path or str
+        E.g. ``<case>/<time>/UMean``.
+    n_cells : int or None
+        Number of cells, to expand a ``uniform`` value (None: one row).
+
+    Returns
+    -------
+    (n,) or (n, k) float
+        Scalars, or k components per cell (vectors k = 3), in the field's units.
+
+    Raises
+    ------
+    VCSInputError
+        For a binary file or an entry that cannot be read.
+    """
+    txt = _field_text(path)
+    i = txt.find("internalField")
+    if i < 0:
+        raise VCSInputError(f"{path}: no internalField")
+    return _value_entry(txt[i + len("internalField") :], n_cells)
+
+
+def read_patch_field(path: Path | str, patch: str, n_faces: int | None = None) -> NDArray[np.floating] | None:
+    """The ``value`` of one patch in the ``boundaryField`` of an ASCII field file.
+
+    Parameters
+    ----------
+    path : Path or str
+        A field file.
+    patch : str
+        Patch name.
+    n_faces : int or None
+        Faces of the patch, to expand a ``uniform`` value (None: one row).
+
+    Returns
+    -------
+    (n,) or (n, k) float or None
+        The face values (the field's units); None when the patch or its value is absent.
+    """
+    txt = _field_text(path)
+    bf = txt.find("boundaryField")
+    if bf < 0:
+        return None
+    m = re.search(rf"(?<![\w.:-]){re.escape(patch)}\s*\{{", txt[bf:])
+    if not m:
+        return None
+    body_start = bf + m.end()
+    close = txt.find("}", body_start)
+    v = re.search(r"\bvalue\b", txt[body_start:close])
+    if not v:
+        return None
+    try:
+        return _value_entry(txt[body_start + v.end() :], n_faces)
+    except VCSInputError:
+        return None
+
+
+# ------------------------------------------------------------------ utility logs
+
+
+def parse_check_mesh_volume(text: str) -> float | None:
+    """Total cell volume (m^3) printed by checkMesh (``Total volume = ...``), or None."""
+    m = re.search(rf"Total volume = ({_FLOAT})", text)
+    return float(m.group(1)) if m else None
+
+
+def parse_layer_summary(text: str) -> dict[str, Any]:
+    """The prism-layer report at the end of a snappyHexMesh log (both families).
+
+    snappyHexMesh's addLayers prints, per iteration, ``Extruding N out of M faces (x%)`` and
+    ``Added N out of M cells (x%)``, then a table ``patch faces layers overall thickness``
+    with, per patch, its faces, the mean number of layers, the overall thickness [m] and that
+    thickness as a percentage of the requested one (src/mesh/snappyHexMesh/
+    snappyHexMeshDriver/snappyLayerDriver.C).
+
+    Parameters
+    ----------
+    text : str
+        The snappyHexMesh log.
+
+    Returns
+    -------
+    dict
+        ``added`` (bool, whether a layer table was found), ``patches``: {name: {``faces``,
+        ``mean_layers``, ``thickness_m``, ``thickness_percent``}}, ``extruded_faces``,
+        ``extrudable_faces`` and ``extruded_fraction`` of the last layer iteration, ``cells_added``
+        / ``cells_wanted`` of the last iteration.
+    """
+    out: dict[str, Any] = {"added": False, "patches": {}}
+    ext = re.findall(r"Extruding (\d+) out of (\d+) faces", text)
+    if ext:
+        a, b = (int(x) for x in ext[-1])
+        out.update(extruded_faces=a, extrudable_faces=b, extruded_fraction=a / b if b else None)
+    added = re.findall(r"Added (\d+) out of (\d+) cells", text)
+    if added:
+        out.update(cells_added=int(added[-1][0]), cells_wanted=int(added[-1][1]))
+    m = list(re.finditer(r"^patch\s+faces\s+layers\s+overall thickness\s*\n.*\n\s*-+.*\n", text, re.M))
+    if m:
+        out["added"] = True
+        for line in text[m[-1].end() :].splitlines():
+            parts = line.split()
+            if len(parts) < 5:
+                break
+            try:
+                out["patches"][parts[0]] = {
+                    "faces": int(parts[1]),
+                    "mean_layers": float(parts[2]),
+                    "thickness_m": float(parts[3]),
+                    "thickness_percent": float(parts[4]),
+                }
+            except ValueError:
+                break
+    return out
+
+
+def oscillatory_shear_index(mean_wss: NDArray[np.floating], tawss: NDArray[np.floating]) -> NDArray[np.floating]:
+    """OSI = (1 - |time average of WSS| / time average of |WSS|) / 2, per wall face.
+
+    Parameters
+    ----------
+    mean_wss : (n, 3) float
+        Time-averaged WSS vectors (any stress unit, e.g. kinematic m^2/s^2).
+    tawss : (n,) float
+        Time-averaged WSS magnitudes (TAWSS), same unit.
+
+    Returns
+    -------
+    (n,) float
+        OSI in [0, 0.5] (dimensionless); 0 where TAWSS is 0.
+    """
+    m = np.linalg.norm(mean_wss, axis=1)
+    ratio = np.divide(m, tawss, out=np.ones_like(m), where=tawss > 0)
+    return np.clip(0.5 * (1.0 - ratio), 0.0, 0.5)
 
 
 def _isnum(s: str) -> bool:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from vcs.cfd.foamfiles import family_of_version, parse_banner
+from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 
 # --------------------------------------------------------------------------- parameters
 
@@ -32,8 +33,13 @@ DEFAULTS: dict[str, Any] = {
     "flavour": None,  # None = detect the installed OpenFOAM; "esi" (v1912/openfoam.com) or "org10"
     "ranks": 1,  # MPI ranks for simpleFoam (1 = serial); decomposition below
     "mesh": {
-        "cell_size": 1.0e-3,  # background (blockMesh) hex edge [m]
-        "pad_cells": 3,  # background box = STL bounds + pad_cells cells on every side
+        "cell_size": "auto",  # lumen cell size [m], or "auto": from the vessel (vcs.cfd.sizing)
+        "cells_across_end": 12,  # auto: at least this many cells across the smaller end diameter
+        "cells_across_narrowest": 8,  # auto: ... and across the narrowest section
+        "max_cells": 1_000_000,  # auto: estimated lumen cells (V / h^3) above this coarsen h (recorded)
+        "max_background_cells": 100_000,  # blockMesh box cells; above: coarser box, levels raised
+        "min_patch_faces": 20,  # each STL solid must become a patch of at least this many faces
+        "pad_cells": 3,  # background box = STL bounds + pad_cells background cells on every side
         "surface_level": [0, 0],  # snappy (min max) refinement level on the whole vessel surface
         "wall_level": [0, 0],  # ... on the wall solid
         "inlet_level": [0, 0],  # ... on the inlet solid (raise to resolve the jet's shear layer)
@@ -41,11 +47,18 @@ DEFAULTS: dict[str, Any] = {
         "n_cells_between_levels": 2,
         "resolve_feature_angle": 30,
         "snap_solve_iterations": 50,
-        "layers": 0,  # wall prism layers (0 = addLayers off)
-        "layer_expansion": 1.2,
-        "final_layer_thickness": 0.3,
-        "min_layer_thickness": 0.1,
+        "layers": 3,  # wall prism layers (snappy addLayers; 0 = off)
+        "layer_expansion": 1.2,  # thickness ratio of consecutive layers
+        "final_layer_thickness": 0.3,  # last layer / local cell size
+        "min_layer_thickness": 0.1,  # thinner layers are not added (/ local cell size)
+        "jet_refinement": {  # refinement cylinder along the jet (inlet.type jet only)
+            "enabled": True,
+            "cells_across": 10,  # at least this many cells across the jet diameter (sets the level)
+            "length": 5.0,  # cylinder length from the inlet along its inward normal [jet diameters]
+            "radius": 2.0,  # cylinder radius [jet radii]
+        },
         "max_non_ortho": 65,
+        "max_boundary_skewness": 4,  # snappy's limit on boundary faces (= checkMesh's, which fails above)
         "max_local_cells": 2_000_000,
         "max_global_cells": 20_000_000,
         "inside_point": None,  # [x, y, z] inside the lumen; None = automatic (from the inlet)
@@ -59,6 +72,9 @@ DEFAULTS: dict[str, Any] = {
         "velocity": 1.2,  # jet velocity [m/s] (paper: 1.2 m/s)
         "valve_area": 1.0e-4,  # effective valve area [m2] (paper: 1 cm2) -> Q = velocity * area
         "flow_rate": None,  # [m3/s]; overrides velocity * valve_area when set
+        "scaling": "fixed",  # fixed | scaled_by_inlet_area: Q x min(A_inlet / reference_inlet_area, max_scale)
+        "reference_inlet_area": 4.909e-4,  # [m2] inlet area at which Q applies unscaled (25 mm diameter)
+        "max_scale": 1.0,  # largest scale factor (1: a dilated root gets no more than Q)
         "centre": None,  # jet centre [x, y, z]; None = area centroid of the inlet patch
     },
     "solver": {
@@ -75,10 +91,16 @@ DEFAULTS: dict[str, Any] = {
         "p_rel_tol": 0.05,
         "U_solver_tolerance": 1.0e-9,
         "U_rel_tol": 0.1,
-        "fallback": "average",  # none | average: if not converged, continue average_iterations
-        # with fieldAverage and report the time-averaged (pseudo-steady) fields
-        "average_iterations": 500,
-        "relaxed_tolerance": 1.0e-3,  # reported criterion for the fallback (converged stays false)
+        "fallback": "transient",  # none | transient: if SIMPLE does not converge, run pimpleFoam
+        # from the SIMPLE state and report time averages (converged only when stationary)
+        "transient": {
+            "flow_throughs": 5.0,  # averaging window [flow-through times V_lumen / Q]
+            "washout_flow_throughs": 1.0,  # start-up wash-out before averaging [flow-through times]
+            "max_co": 1.0,  # Courant number limit of the adjustable time step
+            "stationarity_tolerance": 0.05,  # max relative difference of the two half-window means
+            # of the inlet-outlet pressure difference and of the area-mean time-averaged |WSS|
+            "stationarity_tolerance_U": 0.10,  # ... of U (volume-weighted L2, relative)
+        },
         "timeout_s": None,  # wall-clock limit per utility call [s]
     },
     "decomposition": {
@@ -88,6 +110,13 @@ DEFAULTS: dict[str, Any] = {
         "write_format": "ascii",  # ascii is required by the inlet-profile reader
     },
 }
+
+# the words a config may put into an OpenFOAM dictionary (everything else there is a number)
+INLET_TYPES = ("jet", "uniform", "parabolic")
+INFLOW_SCALINGS = ("fixed", "scaled_by_inlet_area")
+DIV_SCHEMES = ("upwind", "linearUpwind", "LUST", "limitedLinearV")  # div(phi,U), see fvSchemes
+FALLBACKS = ("none", "transient")
+DECOMPOSITION_METHODS = ("hierarchical", "simple")
 
 # ONE table for both flavours: names that differ, the geometry folder and the case files.
 _COMMON_FILES = [
@@ -145,6 +174,79 @@ def deep_merge(base: dict[str, Any], over: dict[str, Any] | None) -> dict[str, A
         else:
             out[k] = copy.deepcopy(v)
     return out
+
+
+def _number(cfd: dict[str, Any], dotted: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise VCSInputError unless ``cfd[dotted]`` is a number in [lo, hi] (or (lo, hi])."""
+    node: Any = cfd
+    for k in dotted.split("."):
+        node = node.get(k) if isinstance(node, dict) else None
+    ok = isinstance(node, (int, float)) and not isinstance(node, bool) and (node > lo if lo_open else node >= lo)
+    if not ok or node > hi:
+        bound = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+        raise VCSInputError(f"cfd.{dotted} must be a number in {bound}, not {node!r}")
+
+
+def _word(cfd: dict[str, Any], dotted: str, allowed: tuple[str, ...]) -> None:
+    """Raise VCSInputError unless ``cfd[dotted]`` is one of ``allowed``."""
+    node: Any = cfd
+    for k in dotted.split("."):
+        node = node.get(k) if isinstance(node, dict) else None
+    if node not in allowed:
+        raise VCSInputError(f"cfd.{dotted} must be one of {', '.join(allowed)}, not {node!r}")
+
+
+def check_cfd(cfd: dict[str, Any]) -> None:
+    """Check the CFD parameters that reach OpenFOAM dictionaries (words from fixed lists, numbers
+    in range); a user-fixable error is a one-line VCSInputError.
+
+    Parameters
+    ----------
+    cfd : dict
+        Parameters merged over :data:`DEFAULTS`.
+
+    Raises
+    ------
+    VCSInputError
+        For a word outside its list (inlet type and scaling, div schemes, fallback, decomposition
+        method, write format), the removed ``fallback: average``, a cell size that is neither
+        ``auto`` nor a length, or a sizing, inflow, transient or jet-refinement number out of
+        range.
+    """
+    if cfd["solver"].get("fallback") == "average":
+        raise VCSInputError(
+            "cfd.solver.fallback 'average' (averaging SIMPLE iterates) was removed: it is not a time average; "
+            "use 'transient' (pimpleFoam, time-averaged fields) or 'none'"
+        )
+    _word(cfd, "inlet.type", INLET_TYPES)
+    _word(cfd, "inlet.scaling", INFLOW_SCALINGS)
+    _number(cfd, "inlet.reference_inlet_area", 0.0, 1.0, lo_open=True)
+    _number(cfd, "inlet.max_scale", 0.0, 100.0, lo_open=True)
+    size = cfd["mesh"].get("cell_size")
+    if size != "auto" and not (isinstance(size, (int, float)) and not isinstance(size, bool) and 0 < size <= 10):
+        raise VCSInputError(f"cfd.mesh.cell_size must be 'auto' or a number of metres in (0, 10], not {size!r}")
+    _number(cfd, "mesh.cells_across_end", 1, 1000)
+    _number(cfd, "mesh.cells_across_narrowest", 1, 1000)
+    _number(cfd, "mesh.max_cells", 1, 1e10)
+    _number(cfd, "mesh.max_background_cells", 1, 1e10)
+    _number(cfd, "mesh.min_patch_faces", 1, 1e9)
+    _word(cfd, "solver.fallback", FALLBACKS)
+    _word(cfd, "solver.startup_scheme", DIV_SCHEMES)
+    _word(cfd, "solver.div_scheme", DIV_SCHEMES)
+    _word(cfd, "decomposition.method", DECOMPOSITION_METHODS)
+    _word(cfd, "io.write_format", ("ascii",))
+    _number(cfd, "solver.transient.flow_throughs", 0.0, 1e3, lo_open=True)
+    _number(cfd, "solver.transient.washout_flow_throughs", 0.0, 1e3)
+    _number(cfd, "solver.transient.max_co", 0.0, 2.0, lo_open=True)
+    _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)
+    _number(cfd, "mesh.layers", 0, 20)
+    _number(cfd, "mesh.max_boundary_skewness", 0.0, 100.0, lo_open=True)
+    _number(cfd, "mesh.jet_refinement.cells_across", 1, 100)
+    _number(cfd, "mesh.jet_refinement.length", 0.0, 100.0, lo_open=True)
+    _number(cfd, "mesh.jet_refinement.radius", 1.0, 20.0)
+    if not isinstance(cfd["mesh"]["jet_refinement"].get("enabled"), bool):
+        raise VCSInputError("cfd.mesh.jet_refinement.enabled must be true or false")
 
 
 def template_dir() -> Path:

@@ -21,6 +21,10 @@ frame (``U_vcs``, ``WSS_vcs``: components along t(tau), e_theta = -v1 sin theta 
 e_rho = v1 cos theta + v2 sin theta), which are invariant to rigid motions and are what the atlas
 compares across patients.
 
+A time-averaged case (the transient fallback of :func:`vcs.cfd.run.run_case`) is sampled from
+its means (UMean, pMean, wallShearStressMean) under the same names U, p, WSS, plus TAWSS and OSI
+on the wall (:func:`read_case`).
+
 The grid itself is :mod:`vcs.grid`; this module reads the case (pyvista's POpenFOAMReader).
 """
 
@@ -36,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from vcs.cfd.foamfiles import oscillatory_shear_index
 from vcs.errors import VCSInputError
 from vcs.grid import GRID_DEFAULTS, grid_axes, grid_points, grid_to_vtk, local_frame, to_vcs_components
 
@@ -50,13 +55,26 @@ log = logging.getLogger(__name__)
 # ---------------------------------------------------------------------------------------------
 # Reading a case
 # ---------------------------------------------------------------------------------------------
+# The time-averaged fields of vcs.cfd.run's transient fallback (fieldAverage) and the names they
+# are sampled under, so that fields.npz keeps U, p, WSS whatever the case was.
+TIME_AVERAGED = {"U": "UMean", "p": "pMean", "wallShearStress": "wallShearStressMean"}
+TAWSS_FIELD = "magWallShearStressMean"  # time average of |WSS| (TAWSS)
+FIELD_SOURCES = ("auto", "time_average", "instantaneous")
+
+
 def read_case(
-    case_dir: Path | str, *, time: float | None = None, wall_patch: str = "wall"
+    case_dir: Path | str, *, time: float | None = None, wall_patch: str = "wall", fields: str = "auto"
 ) -> tuple[pv.UnstructuredGrid, dict[str, pv.PolyData], float]:
     """Internal mesh and boundary patches of a reconstructed OpenFOAM case at the last (or given) time.
 
     Read with pyvista's POpenFOAMReader (a ``case.foam`` marker file is created when missing),
-    with cell and point (cell-to-point) data, in the case's units (metres).
+    with cell and point (cell-to-point) data, in the case's units (metres). A time-averaged case
+    (the transient fallback of :func:`vcs.cfd.run.run_case`) holds ``UMean``, ``pMean`` and
+    ``wallShearStressMean`` next to the instantaneous fields: they are then copied under the
+    names ``U``, ``p`` and ``wallShearStress``, and the wall also gets ``TAWSS`` (time average of
+    |WSS|) and ``OSI`` (oscillatory shear index) when ``magWallShearStressMean`` exists. Which
+    fields were used is in ``internal.field_data["field_source"]`` (``"time_average"`` or
+    ``"instantaneous"``).
 
     Parameters
     ----------
@@ -66,6 +84,9 @@ def read_case(
         Time to read (the nearest written one); None: the last.
     wall_patch : str
         Name of the wall patch, which must exist (it is triangulated).
+    fields : {"auto", "time_average", "instantaneous"}
+        ``"auto"``: the time averages when UMean, pMean and the wall's wallShearStressMean are
+        all there, else the instantaneous fields; the other two force a choice.
 
     Returns
     -------
@@ -79,10 +100,13 @@ def read_case(
     Raises
     ------
     VCSInputError
-        When ``case_dir`` is not a case, has no time with fields, lacks the wall patch, or U or p.
+        When ``case_dir`` is not a case, has no time with fields, lacks the wall patch, U or p,
+        or the time averages asked for; for an unknown ``fields``.
     """
     import pyvista as pv
 
+    if fields not in FIELD_SOURCES:
+        raise VCSInputError(f"fields must be one of {', '.join(FIELD_SOURCES)}, not {fields!r}")
     case = Path(case_dir)
     if not (case / "system" / "controlDict").is_file():
         raise VCSInputError(f"'{case}' is not an OpenFOAM case (no system/controlDict)")
@@ -105,9 +129,6 @@ def read_case(
     names = list(boundary.keys()) if boundary is not None else []
     if wall_patch not in names:
         raise VCSInputError(f"case '{case}' has no '{wall_patch}' patch (patches: {names})")
-    for name in ("U", "p"):
-        if name not in internal.cell_data:
-            raise VCSInputError(f"case '{case}' time {t:g} has no field '{name}'")
     patches = {}
     for name in names:
         # names is empty when boundary is None, which mypy cannot see
@@ -117,6 +138,34 @@ def read_case(
         if not isinstance(b, pv.PolyData):
             b = b.extract_surface(algorithm="dataset_surface")
         patches[name] = b.triangulate() if name == wall_patch else b
+    wall = patches.get(wall_patch)
+    have_means = (
+        all(TIME_AVERAGED[k] in internal.cell_data for k in ("U", "p"))
+        and wall is not None
+        and TIME_AVERAGED["wallShearStress"] in wall.cell_data
+    )
+    if fields == "time_average" and not have_means:
+        raise VCSInputError(
+            f"case '{case}' time {t:g} has no time-averaged fields (UMean, pMean, wallShearStressMean); "
+            "it was not run with the transient fallback"
+        )
+    use_means = have_means and fields != "instantaneous"
+    if use_means:
+        for ds in [internal, *patches.values()]:
+            for base, mean in TIME_AVERAGED.items():
+                for data in (ds.cell_data, ds.point_data):
+                    if mean in data:
+                        data[base] = np.asarray(data[mean])
+        if wall is not None and TAWSS_FIELD in wall.cell_data:
+            for data in (wall.cell_data, wall.point_data):
+                if TAWSS_FIELD in data and "wallShearStress" in data:
+                    tawss = np.asarray(data[TAWSS_FIELD], float)
+                    data["TAWSS"] = tawss
+                    data["OSI"] = oscillatory_shear_index(np.asarray(data["wallShearStress"], float), tawss)
+    for name in ("U", "p"):
+        if name not in internal.cell_data:
+            raise VCSInputError(f"case '{case}' time {t:g} has no field '{name}'")
+    internal.field_data["field_source"] = np.array(["time_average" if use_means else "instantaneous"])
     return internal, patches, float(t)
 
 
@@ -366,6 +415,17 @@ def sample_mesh(
                 "wall_distance_mean": np.float64(dist.mean()),
             }
         )
+        # time-averaged cases: TAWSS (Pa) and OSI (dimensionless) on the wall grid, like WSS
+        for name, scale in (("TAWSS", rho_density), ("OSI", 1.0)):
+            if name in wall.point_data:
+                v = np.einsum("ik,ik->i", w, np.asarray(wall.point_data[name], float)[tri])
+            elif name in wall.cell_data:
+                v = np.asarray(wall.cell_data[name], float)[cell]
+            else:
+                continue
+            out[name] = v.reshape(n_tau, n_theta) * scale
+    source = internal.field_data["field_source"] if "field_source" in internal.field_data else None
+    out["field_source"] = np.str_(source[0] if source is not None and len(source) else "instantaneous")
     out["method"] = np.str_(method)
     out["sample_time_s"] = np.float64(_time.perf_counter() - t0)
     out["interpolation_time_s"] = np.float64(t_probe - t0)
@@ -396,6 +456,7 @@ def sample_case(
     rho_density: float = 1060.0,
     time: float | None = None,
     method: str = "mls",
+    fields: str = "auto",
 ) -> dict[str, Any]:
     """Sample a finished OpenFOAM case on the patient's (tau, theta, rho_n) grid (Section 2.4.2).
 
@@ -415,6 +476,9 @@ def sample_case(
         Time to read (the nearest written one); None: the last.
     method : {"mls", "probe"}
         Interpolation of U and p, see :func:`sample_mesh`.
+    fields : {"auto", "time_average", "instantaneous"}
+        Which fields to sample, see :func:`read_case` (``"auto"``: the time averages of a
+        transient case, else the instantaneous fields). The names in the result stay U, p, WSS.
 
     Returns
     -------
@@ -422,12 +486,15 @@ def sample_case(
         tau (n_tau,), theta (n_theta,), rho_n (n_rho,), rho_w_mm (n_tau, n_theta),
         points (n_tau, n_theta, n_rho, 3) case units,
         U, U_vcs (n_tau, n_theta, n_rho, 3) m/s, p, p_kinematic (n_tau, n_theta, n_rho) Pa, m2/s2,
-        WSS, WSS_vcs (n_tau, n_theta, 3) Pa, WSS_kinematic,
+        WSS, WSS_vcs (n_tau, n_theta, 3) Pa, WSS_kinematic; for a time-averaged case also
+        TAWSS (n_tau, n_theta) Pa (time average of |WSS|; WSS is the time-averaged vector) and
+        OSI (n_tau, n_theta, dimensionless, 0..0.5); field_source ("time_average" or
+        "instantaneous"),
         counts: n_points, n_outside_mesh, n_wall_noslip, n_wall_outside_mesh, n_interior_nearest,
         interior_nearest_max_distance (case units), wall_distance_max/mean, time, timings.
     """
     t0 = _time.perf_counter()
-    internal, patches, t = read_case(case_dir, time=time)
+    internal, patches, t = read_case(case_dir, time=time, fields=fields)
     t_read = _time.perf_counter()
     out = sample_mesh(
         internal,
@@ -464,6 +531,7 @@ COUNT_KEYS = (
     "interpolation_time_s",
     "sample_time_s",
     "method",
+    "field_source",
 )
 
 
@@ -494,8 +562,8 @@ def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path
     npz_path : Path or str
         The ``.npz`` file (compressed); the ``.json`` summary goes next to it.
     vtu_path : Path, str or None
-        A VTU of the grid (case units) with U, U_vcs, p, p_kinematic, rho_n and WSS (on the
-        rho_n = 1 layer, zero inside), for ParaView.
+        A VTU of the grid (case units) with U, U_vcs, p, p_kinematic, rho_n and WSS (and TAWSS,
+        OSI of a time-averaged case; on the rho_n = 1 layer, zero inside), for ParaView.
     """
     npz_path = Path(npz_path)
     np.savez_compressed(npz_path, **fields)
@@ -508,6 +576,11 @@ def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path
             w = np.zeros(fields["U"].shape)
             w[:, :, n_rho - 1] = fields["WSS"]
             data["WSS"] = w
+        for name in ("TAWSS", "OSI"):
+            if name in fields:
+                s = np.zeros(fields["p"].shape)
+                s[:, :, n_rho - 1] = fields[name]
+                data[name] = s
         grid_to_vtk(fields["points"], data).save(str(vtu_path))
 
 

@@ -1,11 +1,13 @@
 """Running a rendered OpenFOAM case: blockMesh, snappyHexMesh, checkMesh, the inlet profile,
-[decomposePar], simpleFoam (start-up, main stage, optional averaging fallback),
-[reconstructPar], wallShearStress; convergence, flow rates, pressure difference and WSS
-collected into ``status.json``."""
+[decomposePar], simpleFoam (start-up, main stage), the transient fallback (pimpleFoam wash-out
+and averaging window, stationarity test of the time average), [reconstructPar]; convergence,
+flow rates, the inlet-outlet pressure difference, WSS (TAWSS, OSI) and the mesh's prism-layer
+coverage collected into ``status.json``."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -19,10 +21,24 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vcs.cfd.case import CASE_JSON, inlet_profile, patch_role, render_files
-from vcs.cfd.foamfiles import last_function_value, mean_function_value, parse_solver_log, patch_geometry
+from vcs.cfd.foamfiles import (
+    function_series,
+    last_function_value,
+    oscillatory_shear_index,
+    parse_check_mesh_volume,
+    parse_layer_summary,
+    parse_solver_log,
+    patch_geometry,
+    read_boundary,
+    read_internal_field,
+    read_patch_field,
+    window_mean,
+)
 from vcs.cfd.openfoam import detect_openfoam, foam_env
 
 # --------------------------------------------------------------------------- running
+
+STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
 
 
 def _run_group(
@@ -122,20 +138,6 @@ def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
     return False, cells, why
 
 
-def _read_patch_vectors(field_file: Path, patch: str) -> NDArray[np.floating] | None:
-    """A patch's vector values in an ASCII field file ((n, 3), or (1, 3) when uniform), or None."""
-    txt = field_file.read_text(errors="replace")
-    bf = txt.find("boundaryField")
-    m = re.search(rf"\b{re.escape(patch)}\s*\{{[^{{}}]*?value\s+nonuniform\s+List<vector>\s*(\d+)\s*\(", txt[bf:], re.S)
-    if not m:
-        m2 = re.search(rf"\b{re.escape(patch)}\s*\{{[^{{}}]*?value\s+uniform\s*\(([^)]*)\)", txt[bf:], re.S)
-        return None if not m2 else np.array([[float(x) for x in m2.group(1).split()]])
-    n = int(m.group(1))
-    start = bf + m.end()
-    vals = re.findall(r"\(([^()]*)\)", txt[start : start + n * 80 + 1000])[:n]
-    return np.array([[float(x) for x in v.split()] for v in vals])
-
-
 def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
     """Write ``residuals.csv`` and (best effort) ``residuals.png`` of the parsed log rows."""
     import csv
@@ -167,32 +169,6 @@ def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
         pass
 
 
-def _use_means(time_dir: Path) -> list[str]:
-    """Fallback: replace U and p by their fieldAverage means (instantaneous kept as *.instantaneous).
-
-    Parameters
-    ----------
-    time_dir : Path
-        The time folder written by the averaging stage.
-
-    Returns
-    -------
-    list of str
-        The fields replaced (``"U"``, ``"p"``); a field without its ``<f>Mean`` file is left as
-        it is.
-    """
-    done = []
-    for f in ("U", "p"):
-        mean = time_dir / f"{f}Mean"
-        if mean.exists() and (time_dir / f).exists():
-            shutil.move(time_dir / f, time_dir / f"{f}.instantaneous")
-            txt = mean.read_text()
-            txt = re.sub(rf"(object\s+){f}Mean;", rf"\1{f};", txt, count=1)
-            (time_dir / f).write_text(txt)
-            done.append(f)
-    return done
-
-
 def _log_summary(parsed: dict[str, Any], log: Path) -> dict[str, Any]:
     """What status.json keeps of a parsed solver log (see :func:`parse_solver_log`)."""
     return {
@@ -209,16 +185,112 @@ def _log_summary(parsed: dict[str, Any], log: Path) -> dict[str, Any]:
     }
 
 
+def _mesh_report(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
+    """What status.json keeps of the mesh: prism-layer coverage (snappyHexMesh's layer table)
+    and the jet refinement region."""
+    m = state["cfd"]["mesh"]
+    log = case_dir / "logs" / "log.snappyHexMesh"
+    layers: dict[str, Any] = {"requested": int(m["layers"])}
+    if int(m["layers"]) > 0:
+        rep: dict[str, Any] = parse_layer_summary(log.read_text(errors="replace") if log.exists() else "")
+        layers.update(rep)
+        walls = [p for name, p in rep["patches"].items() if patch_role(name) == "wall"]
+        if walls:
+            faces = sum(p["faces"] for p in walls)
+            layers["mean_layers"] = sum(p["mean_layers"] * p["faces"] for p in walls) / faces
+            layers["coverage"] = layers["mean_layers"] / int(m["layers"])  # layers added / requested
+        else:  # no layer table: snappyHexMesh added none
+            layers["coverage"] = 0.0
+    return {"layers": layers, "jet_refinement": state.get("jet_region")}
+
+
+def patch_check(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
+    """Did every STL solid become a patch of at least ``mesh.min_patch_faces`` faces, and is the
+    ``background`` patch (the blockMesh box) empty? Read from the meshed case's
+    ``constant/polyMesh/boundary``.
+
+    snappyHexMesh drops an end whose cap is small against the cells around it and still writes a
+    mesh that checkMesh calls OK; the solver then fails far from the cause ("Unable to set
+    reference cell", a floating point exception). A non-empty ``background`` patch means the
+    mesh leaked out of the vessel into the box.
+
+    Parameters
+    ----------
+    case_dir : Path
+        A case after snappyHexMesh (ASCII polyMesh).
+    state : dict
+        Case description (``solids`` with role, area and cell size, ``mesh_sizing``).
+
+    Returns
+    -------
+    dict
+        ``ok`` (bool), ``patches``: {solid: {``role``, ``faces`` (0 when missing),
+        ``min_faces``, ``cell_size_m`` (at that patch), ``radius_m`` (equivalent radius of an
+        end cap)}}, ``background_faces`` (int or None), ``problems`` (list of str), ``reason``
+        (one line: what happened and what to change; None when ok).
+    """
+    sizing = state.get("mesh_sizing") or {}
+    min_faces = int(sizing.get("min_patch_faces", state["cfd"]["mesh"].get("min_patch_faces", 1)))
+    try:
+        boundary = read_boundary(case_dir / "constant" / "polyMesh")
+    except (OSError, ValueError) as exc:
+        why = f"no readable mesh boundary after snappyHexMesh ({exc})"
+        return {"ok": False, "patches": {}, "background_faces": None, "problems": [why], "reason": why}
+    patches: dict[str, Any] = {}
+    problems = []
+    for s in state["solids"]:
+        faces = int(boundary.get(s["name"], {}).get("nFaces", 0))
+        info: dict[str, Any] = {"role": s["role"], "faces": faces, "min_faces": min_faces}
+        h = s.get("cell_size_m")
+        if h is not None:
+            info["cell_size_m"] = h
+        if s["role"] in ("inlet", "outlet") and s.get("area_m2"):
+            info["radius_m"] = math.sqrt(s["area_m2"] / math.pi)
+        patches[s["name"]] = info
+        if faces >= min_faces:
+            continue
+        what = "lost in meshing: 0 faces" if faces == 0 else f"under-resolved in meshing: {faces} faces"
+        text = f"{s['name']} {what} (minimum {min_faces})"
+        if h is not None and "radius_m" in info:
+            text += f"; cell size {h * 1e3:.3g} mm vs {s['name']} radius {info['radius_m'] * 1e3:.3g} mm"
+        elif h is not None:
+            text += f"; cell size {h * 1e3:.3g} mm"
+        problems.append(text)
+    bg = int(boundary.get("background", {}).get("nFaces", 0))  # snappyHexMesh removes an empty patch
+    if bg:
+        problems.append(
+            f"the mesh leaked out of the vessel: the background patch (the blockMesh box) has {bg} faces "
+            "(must be 0); the wall STL is not closed or cfd.mesh.inside_point is outside the lumen"
+        )
+    reason = None
+    if problems:
+        source = (sizing.get("cell_size") or {}).get("source")
+        lost = [p for p in problems if "in meshing" in p]
+        advice = {
+            "patient": "lower the patient's cell_size_mm in the patients sheet",
+            "auto": "raise cfd.mesh.cells_across_end (or give a smaller cfd.mesh.cell_size)",
+        }.get(str(source), "lower cfd.mesh.cell_size")
+        reason = "; ".join(problems) + (f"; {advice}" if lost else "")
+    return {"ok": not problems, "patches": patches, "background_faces": bg, "problems": problems, "reason": reason}
+
+
 def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any]:
     """Mesh and solve a rendered case; writes ``status.json``, ``residuals.csv/png``, ``logs/log.*``.
 
-    Steps: blockMesh, snappyHexMesh -overwrite, checkMesh (failure stops), inlet profile,
-    [decomposePar], simpleFoam start-up (first order) then main stage (residualControl);
-    if not converged and solver.fallback == 'average': averaging stage with fieldAverage whose
-    means replace U and p; [reconstructPar]; wallShearStress. Failures do not raise: they are
-    reported in the status (``reason``, ``failed_log``); nothing raises for a failed,
-    unreadable or not converged run, with or without the fallback. Solver logs of both families
-    are read (openfoam.org 10 prints ``Time = 12s``, ESI ``Time = 12``).
+    Steps: blockMesh, snappyHexMesh -overwrite (jet refinement cylinder, wall prism layers),
+    checkMesh, the patch check (:func:`patch_check`: an STL solid lost or under-resolved in
+    meshing, or a leak into the background box, stops before the solver with the reason in
+    words; so does a failed checkMesh), inlet profile, [decomposePar], simpleFoam start-up (first order)
+    then main stage (residualControl). If SIMPLE does not converge (or diverges: floating point
+    exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
+    written (after a divergence, the start-up's) (adjustable time step at Courant number <=
+    ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
+    ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
+    wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
+    window agree (:func:`stationarity`). [reconstructPar]; wallShearStress. Failures do not
+    raise: they are reported in the status (``reason``, ``failed_log``); nothing raises for a
+    failed, unreadable or not converged run, with or without the fallback. Solver logs of both
+    families are read (openfoam.org 10 prints ``Time = 12s``, ESI ``Time = 12``).
 
     Parameters
     ----------
@@ -230,13 +302,21 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     Returns
     -------
     dict
-        The status (also ``status.json``): ``converged``, ``reason``, ``iterations``,
-        ``final_residuals``, ``cells``, ``mass_imbalance`` (relative), ``flow_rates`` (m^3/s),
-        ``patch_pressure`` (kinematic, m^2/s^2), ``pressure_drop`` (m^2/s^2 and Pa),
-        ``wall_shear_stress_Pa``, ``timings_s`` (s), the inlet profile summary, ``solver_log``
-        (the main stage's log: time unit, convergence message and its count, ``End`` reached,
-        execution/clock time in s, the banner's family/version/build), ``pyfoam_log_analysis``
-        (PyFoam's reading of the last log and whether it agrees with the own parser) and more.
+        The status (also ``status.json``): ``converged``, ``criterion``, ``criterion_used``
+        (``residualControl``, ``time_average_stationary`` or ``none``), ``reason``,
+        ``iterations`` (SIMPLE), ``final_residuals``, ``cells``, ``lumen_volume_m3``, ``mesh``
+        (``sizing``: the cell size and why, the background box, the levels; ``patches``: faces per
+        STL solid; ``background_faces``; prism-layer coverage, jet refinement), ``mesh_ok`` and
+        ``stage`` (``mesh`` when meshing stopped the patient), ``inflow`` (the flow rate applied
+        and why: :func:`vcs.cfd.sizing.choose_inflow`), ``mass_imbalance`` (relative), ``flow_rates``
+        (m^3/s), ``patch_pressure`` (kinematic, m^2/s^2), ``inlet_minus_outlet_pressure``
+        (m^2/s^2 and Pa; negative = pressure recovery), ``wall_shear_stress_Pa`` (and, for a
+        time average, ``tawss_Pa`` and ``osi``), ``fields`` (which field files hold the
+        result), ``transient`` (the window, its stationarity test; only when the fallback ran),
+        ``timings_s`` (s), the inlet profile summary, ``solver_log`` (the main SIMPLE stage's
+        log: time unit, convergence message and its count, ``End`` reached, execution/clock
+        time in s, the banner's family/version/build), ``pyfoam_log_analysis`` (PyFoam's
+        reading of the last SIMPLE log and whether it agrees with the own parser) and more.
     """
     case_dir = Path(case_dir).resolve()
     state = json.loads((case_dir / CASE_JSON).read_text())
@@ -256,7 +336,7 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         "openfoam_version": version,
         "ranks": ranks,
         "converged": False,
-        "criterion": f"initial residuals of p and U < {sol['tolerance']:g}",
+        "criterion": _criterion_text(sol),
         "iterations": 0,
         "final_residuals": {},
         "mass_imbalance": None,
@@ -267,6 +347,8 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         "units": {"p": "m2/s2 (kinematic); *_Pa = x rho", "wallShearStress": "m2/s2 (kinematic); *_Pa = x rho"},
         "rho": cfd["physics"]["rho"],
         "nu": cfd["physics"]["nu"],
+        "mesh": {"sizing": state.get("mesh_sizing")},  # the cell size and why (render_case)
+        "inflow": state.get("inflow"),  # the flow rate applied and why (render_case)
     }
 
     def finish(reason: str | None = None, failed_log: str | None = None) -> dict[str, Any]:
@@ -298,15 +380,27 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     shutil.rmtree(case_dir / "constant" / "polyMesh", ignore_errors=True)
     for f in (case_dir / "logs").glob("log.*"):
         f.unlink()
+    for old in ("residuals.csv", "residuals.png", "transient.png"):
+        (case_dir / old).unlink(missing_ok=True)
     render_files(case_dir, state, ["0/U", "0/p"])  # placeholder inlet until the mesh exists
 
     if run(["blockMesh"], "blockMesh").returncode != 0:
         return finish(_utility_failure(case_dir, "blockMesh"), "blockMesh")
     if run(["snappyHexMesh", "-overwrite"], "snappyHexMesh").returncode != 0:
         return finish(_utility_failure(case_dir, "snappyHexMesh"), "snappyHexMesh")
+    status["mesh"].update(_mesh_report(case_dir, state))
+    patches = patch_check(case_dir, state)
+    status["mesh"]["patches"] = patches["patches"]
+    status["mesh"]["background_faces"] = patches["background_faces"]
     run(["checkMesh"], "checkMesh")
     ok, cells, why = _check_mesh(case_dir / "logs" / "log.checkMesh")
     status["cells"] = cells
+    check_log = (case_dir / "logs" / "log.checkMesh").read_text(errors="replace")
+    status["lumen_volume_m3"] = parse_check_mesh_volume(check_log)
+    if not patches["ok"]:  # a lost end or a leak: say so before anything else (checkMesh says OK)
+        status["mesh_ok"] = False
+        status["stage"] = "mesh"
+        return finish(patches["reason"], "snappyHexMesh")
     if not ok:
         status["mesh_ok"] = False
         return finish(why, "checkMesh")
@@ -327,94 +421,430 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         if run(["decomposePar", "-force"], "decomposePar").returncode != 0:
             return finish(_utility_failure(case_dir, "decomposePar"), "decomposePar")
 
-    stage_files = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
     logs = []
     n_start = int(sol["startup_iterations"])
     if n_start > 0:
         render_files(
-            case_dir, state, stage_files, end_time=n_start, div_scheme=sol["startup_scheme"], residual_control=False
+            case_dir, state, STAGE_FILES, end_time=n_start, div_scheme=sol["startup_scheme"], residual_control=False
         )
         r = run(["simpleFoam"], "simpleFoam.startup", ranks)
         logs.append(case_dir / "logs" / "log.simpleFoam.startup")
         if r.returncode != 0:
             return finish(_solver_failure(logs[-1], "start-up"), "simpleFoam.startup")
-    render_files(case_dir, state, stage_files, end_time=int(sol["max_iterations"]))
+    render_files(case_dir, state, STAGE_FILES, end_time=int(sol["max_iterations"]))
     r = run(["simpleFoam"], "simpleFoam", ranks)
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = parse_solver_log(logs[-1])
     status["solver_log"] = _log_summary(main, logs[-1])
+    diverged = None  # SIMPLE's divergence, when the transient fallback takes over from it
     if r.returncode != 0:
-        _collect(case_dir, status, logs, state)
-        return finish(_solver_failure(logs[-1], "main"), "simpleFoam")
+        failure = _solver_failure(logs[-1], "main")
+        if sol.get("fallback") != "transient" or "diverged" not in failure:
+            _collect(case_dir, status, logs, state)
+            return finish(failure, "simpleFoam")
+        diverged = failure  # steady SIMPLE blew up; an unsteady flow may still have a time average
     last = main["rows"][-1] if main["rows"] else {}
     tol = float(sol["tolerance"])
-    if not last and not main["converged_message"]:
-        # nothing to judge convergence on, and nothing to start an average from: say so
+    if diverged is None and not last and not main["converged_message"]:
+        # nothing to judge convergence on, and nothing to start a transient run from: say so
         _collect(case_dir, status, logs, state)
         return finish(
             f"no SIMPLE iteration could be read from logs/log.simpleFoam ({main['time_lines']} time lines, "
             "none with residuals): unrecognised solver output, convergence unknown; fallback not run",
             "simpleFoam",
         )
-    converged = bool(main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol))
+    converged = diverged is None and bool(
+        main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol)
+    )
     status["converged"] = converged
-    averaged = False
+    status["criterion_used"] = "residualControl" if converged else "none"
+    status["fields"] = {"U": "U", "p": "p", "WSS": "wallShearStress", "time_averaged": False}
+    transient: dict[str, Any] | None = None
     if not converged:
-        status["reason"] = (
-            f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
-            f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
-        )
-        if sol.get("fallback") == "average" and int(sol["average_iterations"]) > 0:
-            status["averaging_from"] = int(last.get("time", sol["max_iterations"]))
-            end = status["averaging_from"] + int(sol["average_iterations"])
-            render_files(case_dir, state, stage_files, end_time=end, residual_control=False, average=True)
-            r = run(["simpleFoam"], "simpleFoam.average", ranks)
-            logs.append(case_dir / "logs" / "log.simpleFoam.average")
-            if r.returncode != 0:
-                _collect(case_dir, status, logs, state)
-                return finish(status["reason"] + "; " + _solver_failure(logs[-1], "averaging"), "simpleFoam.average")
-            averaged = True
-    if ranks > 1:
+        if diverged is not None:  # the transient starts from the last state SIMPLE wrote (its start-up's)
+            status["reason"] = diverged
+        else:
+            status["reason"] = (
+                f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
+                f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
+            )
+        if sol.get("fallback") == "transient":
+            transient = _transient_fallback(case_dir, state, status, run, ranks, prof)
+    if ranks > 1 and not (transient and transient.get("evaluated")):  # the transient reconstructed its own
         if run(["reconstructPar", "-latestTime"], "reconstructPar").returncode != 0:
             return finish(
                 (status["reason"] + "; " if status["reason"] else "") + "reconstructPar failed", "reconstructPar"
             )
-    fallback_note = ""
-    if averaged:
-        latest = _latest_time(case_dir)  # the averaging stage wrote a time folder
-        try:
-            means = _use_means(case_dir / latest) if latest and float(latest) > status["averaging_from"] else []
-        except OSError as exc:  # a field file that cannot be moved or written: reported below
-            means, latest = [], f"{latest} ({type(exc).__name__}: {exc})"
-        if means == ["U", "p"]:
-            run(["simpleFoam", "-postProcess", "-func", "wallShearStress", "-latestTime"], "wallShearStress")
-            status["criterion_used"] = "pseudo_steady_time_average"
-        else:  # no means to report: the fields stay the instantaneous ones, and the status says so
-            averaged = False
-            status["criterion_used"] = "none"
-            fallback_note = (
-                f"; fallback: the averaging stage wrote no UMean/pMean (latest time {latest}), "
-                "U and p are the instantaneous fields of the last iteration"
-            )
-        status["average_iterations"] = int(sol["average_iterations"])
-    else:
-        status["criterion_used"] = "residualControl" if converged else "none"
-    _collect(case_dir, status, logs, state)
+    window = None
+    if transient is not None and transient.get("averaging_start_time") is not None and transient.get("evaluated"):
+        window = (transient["averaging_start_time"], transient["end_time"])
+    _collect(case_dir, status, logs, state, window=window)
     if converged and not main["rows"] and main["converged_iterations"]:
         status["iterations"] = int(main["converged_iterations"])  # the message's count, no row read
-    if averaged:
-        rel = status.get("averaging", {}).get("max_initial_residual")
-        status["converged_relaxed"] = bool(rel is not None and rel < float(sol["relaxed_tolerance"]))
-        rel_txt = f"{rel:.3g}" if rel is not None else "unknown (no iteration read from logs/log.simpleFoam.average)"
-        fallback_note = (
-            f"; fallback: U and p are the time averages over the last {sol['average_iterations']} "
-            f"iterations (pseudo-steady), max residual during averaging {rel_txt} "
-            f"(relaxed criterion {sol['relaxed_tolerance']:g}: "
-            f"{'met' if status['converged_relaxed'] else 'not met'})"
-        )
-    if fallback_note:
-        status["reason"] = (status["reason"] or "") + fallback_note
     return finish()
+
+
+def _criterion_text(sol: dict[str, Any]) -> str:
+    """The convergence criterion of a solver set-up, in words (status.json ``criterion``)."""
+    txt = f"initial residuals of p and U < {sol['tolerance']:g}"
+    if sol.get("fallback") == "transient":
+        tr = sol["transient"]
+        txt += (
+            f"; else (fallback transient) the time average over {tr['flow_throughs']:g} flow-through times "
+            f"after a {tr['washout_flow_throughs']:g} flow-through wash-out, stationary: its two halves agree "
+            f"within {100 * tr['stationarity_tolerance']:g} % (inlet-outlet pressure difference, mean TAWSS) "
+            f"and {100 * tr['stationarity_tolerance_U']:g} % (volume L2 of U)"
+        )
+    return txt
+
+
+# --------------------------------------------------------------------------- transient fallback
+
+
+def _round_up(x: float, digits: int = 3) -> float:
+    """``x`` > 0 rounded up to ``digits`` significant digits (short time-folder names)."""
+    if x <= 0:
+        return 0.0
+    e = math.floor(math.log10(x)) - digits + 1
+    return math.ceil(x / 10.0**e - 1e-9) * 10.0**e
+
+
+def _fmt_time(t: float) -> str:
+    """A solver time for a dictionary (12 significant digits)."""
+    return f"{t:.12g}"
+
+
+def _time_dirs(root: Path) -> list[tuple[float, str]]:
+    """(value, name) of the numeric time folders in ``root``, sorted by value."""
+    out = []
+    if root.is_dir():
+        for p in root.iterdir():
+            if p.is_dir():
+                try:
+                    out.append((float(p.name), p.name))
+                except ValueError:
+                    pass
+    return sorted(out)
+
+
+def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak_velocity: float) -> dict[str, Any]:
+    """The wash-out and averaging window of the transient fallback, from the flow-through time.
+
+    Parameters
+    ----------
+    state : dict
+        Case description (``cfd.solver.transient``, ``flow_rate`` m^3/s, ``mesh_sizing``
+        (smallest cell); without it ``cfd.mesh`` and ``jet_region``).
+    volume : float
+        Lumen (mesh) volume [m^3].
+    start_time : float
+        Solver time the transient run starts from (the last SIMPLE iteration, a label in s).
+    peak_velocity : float
+        Largest inlet velocity [m/s], for the first time step.
+
+    Returns
+    -------
+    dict
+        ``flow_through_time_s`` = volume / flow rate, ``washout_s``, ``window_s`` (rounded up to 3
+        significant digits), ``washout_flow_throughs``, ``window_flow_throughs`` (the rounded
+        values in flow-through times), ``start_time``, ``averaging_start_time``, ``mid_time``,
+        ``end_time`` (solver times, s), ``delta_t_initial_s`` (max_co x smallest cell /
+        peak velocity; pimpleFoam lowers it further when the Courant number asks),
+        ``max_delta_t_s`` (a twentieth of the half window).
+    """
+    cfd = state["cfd"]
+    tr = cfd["solver"]["transient"]
+    t_ft = volume / float(state["flow_rate"])
+    washout = _round_up(float(tr["washout_flow_throughs"]) * t_ft)
+    window = _round_up(float(tr["flow_throughs"]) * t_ft)
+    if state.get("mesh_sizing"):
+        h_min = float(state["mesh_sizing"]["smallest_cell_m"])
+    else:  # a state without sizing: a numeric cell size and the configured levels
+        m = cfd["mesh"]
+        levels = [*m["surface_level"], *m["wall_level"], *m["inlet_level"], *m["outlet_level"]]
+        if state.get("jet_region"):
+            levels.append(state["jet_region"]["level"])
+        h_min = float(m["cell_size"]) / 2 ** max(int(x) for x in levels)
+    t_w = start_time + washout
+    return {
+        "flow_through_time_s": t_ft,
+        "washout_s": washout,
+        "washout_flow_throughs": washout / t_ft,
+        "window_s": window,
+        "window_flow_throughs": window / t_ft,
+        "start_time": start_time,
+        "averaging_start_time": t_w,
+        "mid_time": t_w + 0.5 * window,
+        "end_time": t_w + window,
+        "delta_t_initial_s": float(tr["max_co"]) * h_min / max(peak_velocity, 1e-12),
+        "max_delta_t_s": 0.05 * window,
+    }
+
+
+def _transient_fallback(
+    case_dir: Path, state: dict[str, Any], status: dict[str, Any], run: _Runner, ranks: int, prof: dict[str, Any]
+) -> dict[str, Any]:
+    """Run the transient fallback and judge its stationarity; fills ``status``; never raises.
+
+    Returns the ``status["transient"]`` dict (``evaluated`` true when the half-window test ran).
+    """
+    simple_reason = status["reason"]
+    tr: dict[str, Any] = {"solver": "pimpleFoam", "evaluated": False, "steady_not_converged": simple_reason}
+    status["transient"] = tr
+    status["criterion_used"] = "none"
+
+    def fail(why: str, log: str | None = None) -> dict[str, Any]:
+        status["reason"] = f"{simple_reason}; transient fallback: {why}"
+        if log:
+            status["failed_log"] = str(case_dir / "logs" / f"log.{log}")
+        return tr
+
+    try:
+        volume = status.get("lumen_volume_m3")
+        if not volume:
+            return fail("lumen volume unknown (checkMesh printed no 'Total volume'), no flow-through time")
+        root = case_dir / "processor0" if ranks > 1 else case_dir
+        times = _time_dirs(root)
+        if not times or times[-1][0] <= 0:
+            return fail("the SIMPLE stage wrote no time folder to start from")
+        plan = transient_plan(state, float(volume), times[-1][0], float(prof["peak_velocity"]))
+        tr.update(plan)
+        tr["started_from"] = f"SIMPLE iteration {times[-1][1]}"
+        steps: dict[str, int] = {}
+        tr["time_steps"] = steps
+        common = {
+            "transient": True,
+            "residual_control": False,
+            "delta_t": _fmt_time(plan["delta_t_initial_s"]),
+            "max_delta_t": _fmt_time(plan["max_delta_t_s"]),
+        }
+        # the restart would take the time step of the SIMPLE stage (1) from <time>/uniform/time:
+        # without that file the controlDict's deltaT applies, lowered to max_co by pimpleFoam
+        for t_dir in [case_dir / times[-1][1]] + [d / times[-1][1] for d in case_dir.glob("processor*")]:
+            (t_dir / "uniform" / "time").unlink(missing_ok=True)
+        stages = []
+        if plan["washout_s"] > 0:
+            stages.append(("washout", plan["averaging_start_time"], plan["washout_s"], False))
+        stages.append(("average", plan["end_time"], 0.5 * plan["window_s"], True))
+        parsed: dict[str, Any] = {}
+        for name, end, interval, average in stages:
+            render_files(
+                case_dir,
+                state,
+                STAGE_FILES,
+                end_time=_fmt_time(end),
+                write_interval=_fmt_time(interval),
+                average=average,
+                **common,
+            )
+            log = f"pimpleFoam.{name}"
+            r = run(["pimpleFoam"], log, ranks)
+            parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
+            steps[name] = len(parsed["rows"])
+            if r.returncode != 0:
+                return fail(_solver_failure(case_dir / "logs" / f"log.{log}", name, "pimpleFoam"), log)
+        tr["courant_max"] = parsed["courant_max"]
+        tr["delta_t_s"] = {"min": parsed["delta_t_min"], "max": parsed["delta_t_max"]}
+        tr["solver_log"] = _log_summary(parsed, case_dir / "logs" / "log.pimpleFoam.average")
+        if parsed["rows"]:
+            tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
+        written = [t for t in _time_dirs(root) if t[0] > plan["averaging_start_time"] + 1e-9]
+        if not written:
+            return fail("the averaging stage wrote no time folder", "pimpleFoam.average")
+        mid = min(written, key=lambda t: abs(t[0] - plan["mid_time"]))
+        end = written[-1]
+        slack = 1e-3 * plan["window_s"]  # write times are hit exactly (adjustableRunTime), names rounded
+        if abs(end[0] - plan["end_time"]) > slack or abs(mid[0] - plan["mid_time"]) > slack:
+            return fail(
+                f"the averaging stage ended at {end[1]} (planned {_fmt_time(plan['end_time'])}), middle write at "
+                f"{mid[1]} (planned {_fmt_time(plan['mid_time'])})",
+                "pimpleFoam.average",
+            )
+        if ranks > 1:
+            if run(["reconstructPar", "-time", f"{mid[1]},{end[1]}"], "reconstructPar").returncode != 0:
+                return fail("reconstructPar failed", "reconstructPar")
+        tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
+        verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
+        tr.update(verdict)
+        tr["evaluated"] = True
+        status["criterion_used"] = "time_average_stationary"
+        status["fields"] = {
+            "U": "UMean",
+            "p": "pMean",
+            "WSS": "wallShearStressMean",
+            "TAWSS": "magWallShearStressMean",
+            "time_averaged": True,
+        }
+        _plot_transient(case_dir, state, plan, verdict["halves"])
+        if verdict["stationary"]:
+            status["converged"] = True
+            status["reason"] = None
+        else:
+            status["reason"] = f"{simple_reason}; {verdict['why']}"
+        return tr
+    except Exception as exc:  # noqa: BLE001 - the fallback never raises: its failure is a reason
+        return fail(f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+
+
+def _wall_faces(case_dir: Path, state: dict[str, Any]) -> list[tuple[str, NDArray[np.floating]]]:
+    """(name, face areas m^2) of the wall patches."""
+    out = []
+    for p in state["patches"]:
+        if p["role"] == "wall":
+            _, sf = patch_geometry(case_dir, p["name"])
+            out.append((p["name"], np.linalg.norm(sf, axis=1)))
+    return out
+
+
+def _wall_values(time_dir: Path, field: str, walls: list[tuple[str, NDArray[np.floating]]]) -> NDArray[np.floating]:
+    """A field's values on all wall faces (concatenated in ``walls`` order)."""
+    vals = []
+    for name, a in walls:
+        v = read_patch_field(time_dir / field, name, len(a))
+        if v is None or len(v) != len(a):
+            raise ValueError(f"{time_dir.name}/{field} has no values for patch {name!r}")
+        vals.append(v)
+    return np.concatenate(vals)
+
+
+def stationarity(
+    case_dir: Path, state: dict[str, Any], plan: dict[str, Any], mid: str, end: str, peak_velocity: float
+) -> dict[str, Any]:
+    """Compare the two halves of the averaging window (the stationarity test of the time average).
+
+    fieldAverage wrote the running means at the middle (= mean of the first half, M1) and at the
+    end (= mean of the whole window, M) of the window; the halves are equally long, so the mean
+    of the second half is M2 = 2 M - M1, exactly. Compared (relative differences):
+
+    * inlet-outlet pressure difference (time-weighted means of the patch-averaged p over each
+      half), relative to |dp| of the whole window but at least 10 % of the inlet dynamic pressure
+      U_peak^2 / 2 (dp may cross zero);
+    * area-weighted mean TAWSS (time average of |WSS|) on the wall, relative to the window's;
+    * U: volume-weighted L2 norm of UMean2 - UMean1 relative to that of the window's UMean.
+
+    Parameters
+    ----------
+    case_dir : Path
+        The (reconstructed) case.
+    state : dict
+        Case description (patches, ``cfd.solver.transient`` tolerances, ``cfd.physics.rho``).
+    plan : dict
+        :func:`transient_plan` (the solver times of the window).
+    mid, end : str
+        Names of the time folders at the middle and at the end of the window.
+    peak_velocity : float
+        Largest inlet velocity [m/s].
+
+    Returns
+    -------
+    dict
+        ``halves``: {``first``, ``second``, ``window``: {``inlet_minus_outlet_pressure_Pa``,
+        ``tawss_mean_Pa``}}, ``half_window_differences``: {``inlet_minus_outlet_pressure``,
+        ``tawss_mean``, ``U_L2``} (relative), ``tolerances`` (the same keys), ``stationary``
+        (bool), ``why`` (one line, when not stationary).
+    """
+    tr = state["cfd"]["solver"]["transient"]
+    rho = float(state["cfd"]["physics"]["rho"])
+    t_w, t_m, t_e = plan["averaging_start_time"], plan["mid_time"], plan["end_time"]
+    # dp of each half from the per-step patch averages (time-weighted, as fieldAverage does)
+    inlets = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
+    outlets = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
+
+    def dp(a: float, b: float) -> float:
+        pin = [window_mean(case_dir, f"pressure_{n}", a, b) for n in inlets]
+        pout = [window_mean(case_dir, f"pressure_{n}", a, b) for n in outlets]
+        vin = [v for v in pin if v is not None]
+        vout = [v for v in pout if v is not None]
+        if len(vin) != len(pin) or len(vout) != len(pout) or not vin or not vout:
+            raise ValueError(f"no patch pressure written between solver times {a:g} and {b:g}")
+        return vin[0] - float(np.mean(vout))
+
+    dp1, dp2, dpw = dp(t_w, t_m), dp(t_m, t_e), dp(t_w, t_e)
+    dp_scale = max(abs(dpw), 0.1 * 0.5 * peak_velocity**2)
+    # TAWSS: area-mean of magWallShearStressMean (linear in the mean, so second half = 2 M - M1)
+    walls = _wall_faces(case_dir, state)
+    area = np.concatenate([a for _, a in walls])
+    tm1 = float((_wall_values(case_dir / mid, "magWallShearStressMean", walls) * area).sum() / area.sum())
+    tmw = float((_wall_values(case_dir / end, "magWallShearStressMean", walls) * area).sum() / area.sum())
+    tm2 = 2.0 * tmw - tm1
+    # U: volume-weighted L2
+    vol = read_internal_field(case_dir / end / "V")
+    u1 = read_internal_field(case_dir / mid / "UMean", len(vol))
+    uw = read_internal_field(case_dir / end / "UMean", len(vol))
+    if u1.shape != uw.shape or len(uw) != len(vol):
+        raise ValueError(f"UMean ({u1.shape}, {uw.shape}) and V ({vol.shape}) do not match")
+    u2 = 2.0 * uw - u1
+    l2 = float(np.sqrt((vol * ((u2 - u1) ** 2).sum(1)).sum() / max((vol * (uw**2).sum(1)).sum(), 1e-300)))
+    diffs = {
+        "inlet_minus_outlet_pressure": abs(dp2 - dp1) / dp_scale,
+        "tawss_mean": abs(tm2 - tm1) / max(abs(tmw), 1e-300),
+        "U_L2": l2,
+    }
+    tols = {
+        "inlet_minus_outlet_pressure": float(tr["stationarity_tolerance"]),
+        "tawss_mean": float(tr["stationarity_tolerance"]),
+        "U_L2": float(tr["stationarity_tolerance_U"]),
+    }
+    bad = [k for k in diffs if not diffs[k] <= tols[k]]  # NaN counts as not stationary
+    words = {
+        "inlet_minus_outlet_pressure": "inlet-outlet pressure difference",
+        "tawss_mean": "mean TAWSS",
+        "U_L2": "U (L2)",
+    }
+    out: dict[str, Any] = {
+        "halves": {
+            "first": {"inlet_minus_outlet_pressure_Pa": dp1 * rho, "tawss_mean_Pa": tm1 * rho},
+            "second": {"inlet_minus_outlet_pressure_Pa": dp2 * rho, "tawss_mean_Pa": tm2 * rho},
+            "window": {"inlet_minus_outlet_pressure_Pa": dpw * rho, "tawss_mean_Pa": tmw * rho},
+        },
+        "half_window_differences": diffs,
+        "tolerances": tols,
+        "pressure_difference_scale_Pa": dp_scale * rho,
+        "stationary": not bad,
+    }
+    if bad:
+        out["why"] = (
+            f"time average not stationary: the two halves of the {plan['window_s']:.4g} s averaging window "
+            f"({plan['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
+            f"{plan['washout_s']:.3g} s wash-out) differ by "
+            + ", ".join(f"{100 * diffs[k]:.3g} % in {words[k]} (tolerance {100 * tols[k]:g} %)" for k in bad)
+            + "; lengthen cfd.solver.transient.flow_throughs (or washout_flow_throughs)"
+        )
+    return out
+
+
+def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any], halves: dict[str, Any]) -> None:
+    """``transient.png``: the inlet-outlet pressure difference over the transient run, the window
+    and its two half means (best effort, never fails)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        rho = float(state["cfd"]["physics"]["rho"])
+        ins = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
+        outs = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
+        a = function_series(case_dir, f"pressure_{ins[0]}")
+        outs_s = [function_series(case_dir, f"pressure_{n}") for n in outs]
+        sel = a[:, 0] > plan["start_time"]
+        t = a[sel, 0] - plan["start_time"]
+        po = np.mean([np.interp(a[sel, 0], o[:, 0], o[:, 1]) for o in outs_s], axis=0)
+        fig, ax = plt.subplots(figsize=(7, 4))
+        ax.plot(t, (a[sel, 1] - po) * rho, lw=0.6, label="instantaneous")
+        t_w, t_m, t_e = (plan[k] - plan["start_time"] for k in ("averaging_start_time", "mid_time", "end_time"))
+        ax.axvspan(t_w, t_e, alpha=0.1, label="averaging window")
+        for (a0, b0), half in ((t_w, t_m), halves["first"]), ((t_m, t_e), halves["second"]):
+            ax.hlines(half["inlet_minus_outlet_pressure_Pa"], a0, b0, colors="k")
+        ax.set_xlabel(f"time since the end of SIMPLE [s] (flow-through time {plan['flow_through_time_s']:.3g} s)")
+        ax.set_ylabel("p(inlet) - p(outlet) [Pa]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+        fig.tight_layout()
+        fig.savefig(case_dir / "transient.png", dpi=100)
+        plt.close(fig)
+    except Exception:  # noqa: BLE001 - plotting must never fail a run
+        pass
 
 
 def _utility_failure(case_dir: Path, utility: str) -> str:
@@ -432,15 +862,17 @@ def _utility_failure(case_dir: Path, utility: str) -> str:
     return f"{utility} failed{detail} (see logs/log.{utility})"
 
 
-def _solver_failure(log: Path, stage: str) -> str:
-    """One-line reason for a failed simpleFoam stage from the end of its log."""
+def _solver_failure(log: Path, stage: str, solver: str = "simpleFoam") -> str:
+    """One-line reason for a failed solver stage from the end of its log."""
     txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
     m = re.search(r"(FOAM FATAL[^\n]*\n(?:[^\n]*\n){0,6})", txt)
     if "Floating point exception" in txt or "sigFpe" in txt:
-        return f"simpleFoam ({stage}) diverged: floating point exception (see logs/{log.name})"
+        return f"{solver} ({stage}) diverged: floating point exception (see logs/{log.name})"
     if m:
-        return f"simpleFoam ({stage}) failed: " + " ".join(m.group(1).split())[:400]
-    return f"simpleFoam ({stage}) exited with an error (see logs/{log.name})"
+        return f"{solver} ({stage}) failed: " + " ".join(m.group(1).split())[:400]
+    if "# vcsflow: timeout" in txt:
+        return f"{solver} ({stage}) stopped: timeout (cfd.solver.timeout_s; see logs/{log.name})"
+    return f"{solver} ({stage}) exited with an error (see logs/{log.name})"
 
 
 def _pyfoam_check(log: Path, own: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -499,8 +931,30 @@ def _pyfoam_check(log: Path, own: dict[str, Any] | None = None) -> dict[str, Any
     return out
 
 
-def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: dict[str, Any]) -> None:
-    """Add residuals, iterations, flow rates, mass imbalance, pressure drop and WSS to ``status``."""
+def _collect(
+    case_dir: Path,
+    status: dict[str, Any],
+    logs: list[Path],
+    state: dict[str, Any],
+    window: tuple[float, float] | None = None,
+) -> None:
+    """Add residuals, iterations, flow rates, mass imbalance, the inlet-outlet pressure difference
+    and WSS (time-averaged: TAWSS and OSI too) to ``status``.
+
+    Parameters
+    ----------
+    case_dir : Path
+        The case.
+    status : dict
+        The status being built (``fields`` says which field files hold the result).
+    logs : list of Path
+        The SIMPLE stages' logs (residuals, iterations).
+    state : dict
+        Case description.
+    window : (float, float) or None
+        The averaging window (solver times, s) of a time-averaged result: flow rates and patch
+        pressures are time-weighted means over it; None: the last value.
+    """
     rows: list[dict[str, Any]] = []
     stage_iters = {}
     for lg in logs:
@@ -517,24 +971,15 @@ def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: di
         status["continuity_errors"] = {
             k.replace("cont_", ""): last[k] for k in ("cont_local", "cont_global", "cont_cumulative") if k in last
         }
-        if logs and logs[-1].name.endswith(".average"):
-            avg_rows = parse_solver_log(logs[-1])["rows"]
-            status["averaging"] = {
-                "max_initial_residual": float(max(max(r.get("p", 0), r.get("U", 0)) for r in avg_rows))
-                if avg_rows
-                else None
-            }
     last_log = [lg for lg in logs if lg.exists()][-1:]
     own_last = parse_solver_log(last_log[0])["rows"][-1:] if last_log else []
     status["pyfoam_log_analysis"] = _pyfoam_check(last_log[0], own_last[0] if own_last else None) if last_log else None
     rho = float(state["cfd"]["physics"]["rho"])
-    avg_from = status.get("averaging_from")
 
     def fo_value(name: str) -> float | None:
-        """Value of function object ``name`` (window mean in the fallback, else last)."""
-        # fallback: mean over the averaging window (consistent with UMean/pMean); else last iteration
-        if avg_from is not None:
-            return mean_function_value(case_dir, name, avg_from)
+        """Value of function object ``name``: mean over the averaging window, else the last one."""
+        if window is not None:
+            return window_mean(case_dir, name, *window)
         return last_function_value(case_dir, name)
 
     flows = {}
@@ -552,29 +997,41 @@ def _collect(case_dir: Path, status: dict[str, Any], logs: list[Path], state: di
     po = [v for k, v in pin.items() if patch_role(k) == "outlet" and v is not None]
     if pi and po:
         dp = pi[0] - float(np.mean(po))
-        status["pressure_drop"] = {"kinematic_m2s2": dp, "Pa": dp * rho}
+        status["inlet_minus_outlet_pressure"] = {
+            "kinematic_m2s2": dp,
+            "Pa": dp * rho,
+            "definition": "area-mean p on the inlet minus the mean of the outlets' area-mean p"
+            + (" (time-weighted over the averaging window)" if window is not None else ""),
+            "pressure_recovery": bool(dp < 0),  # p rises downstream (e.g. after the jet): not a drop
+        }
     latest = _latest_time(case_dir)
+    fields = status.get("fields") or {}
     if latest and float(latest) > 0:
-        wss_file = case_dir / latest / "wallShearStress"
-        walls = [p["name"] for p in state["patches"] if p["role"] == "wall"]
-        if wss_file.exists() and walls:
-            try:
-                vals, areas = [], []
-                for w in walls:
-                    v = _read_patch_vectors(wss_file, w)
-                    _, sf = patch_geometry(case_dir, w)
-                    a = np.linalg.norm(sf, axis=1)
-                    if v is not None and len(v) == 1:
-                        v = np.repeat(v, len(a), 0)
-                    if v is not None and len(v) == len(a):
-                        vals.append(np.linalg.norm(v, axis=1))
-                        areas.append(a)
-                if vals:
-                    mag, a = np.concatenate(vals), np.concatenate(areas)
-                    status["wall_shear_stress_Pa"] = {
-                        "mean": float((mag * a).sum() / a.sum() * rho),
-                        "max": float(mag.max() * rho),
-                        "min": float(mag.min() * rho),
-                    }
-            except Exception as exc:  # noqa: BLE001
-                status["wall_shear_stress_Pa"] = {"error": str(exc)}
+        try:
+            walls = _wall_faces(case_dir, state)
+            if not walls:
+                return
+            a = np.concatenate([w[1] for w in walls])
+            tdir = case_dir / latest
+            wss_name = fields.get("WSS", "wallShearStress")
+            if not (tdir / wss_name).exists():
+                return
+            mean_vec = _wall_values(tdir, wss_name, walls)
+            mag = np.linalg.norm(mean_vec, axis=1)
+
+            def stats(x: NDArray[np.floating], scale: float) -> dict[str, float]:
+                return {
+                    "mean": float((x * a).sum() / a.sum() * scale),
+                    "max": float(x.max() * scale),
+                    "min": float(x.min() * scale),
+                }
+
+            status["wall_shear_stress_Pa"] = stats(mag, rho) | {"field": wss_name}
+            tawss_name = fields.get("TAWSS")
+            if tawss_name and (tdir / tawss_name).exists():
+                tawss = _wall_values(tdir, tawss_name, walls)
+                status["tawss_Pa"] = stats(tawss, rho) | {"field": tawss_name}
+                osi = oscillatory_shear_index(mean_vec, tawss)
+                status["osi"] = {"mean": float((osi * a).sum() / a.sum()), "max": float(osi.max())}
+        except Exception as exc:  # noqa: BLE001
+            status["wall_shear_stress_Pa"] = {"error": str(exc)}

@@ -433,11 +433,16 @@ class OutputFolder:
         self._created = False
 
     def __enter__(self) -> OutputFolder:
-        if not self.path.is_dir():
-            self.path.mkdir()
-            self._created = True
-        for name in self.names:
-            remove_leftovers(self.path / name)
+        try:
+            if not self.path.is_dir():
+                self._created = True
+                self.path.mkdir()
+            for name in self.names:
+                remove_leftovers(self.path / name)
+        except BaseException:  # Ctrl-C right after mkdir: __exit__ would not run
+            if self._created and self.path.is_dir() and not any(self.path.iterdir()):
+                self.path.rmdir()
+            raise
         return self
 
     def file(self, name: str) -> Path:
@@ -478,7 +483,10 @@ class OutputFolder:
         for name in stale:
             (self.path / name).unlink()
         if stale or self.record.is_file():
-            error = str(exc) if isinstance(exc, Exception) and str(exc) else type(exc).__name__
+            if isinstance(exc, KeyboardInterrupt):
+                error = "interrupted (Ctrl-C)"
+            else:
+                error = str(exc) or type(exc).__name__
             record = {
                 "command": f"vcs {self.command}",
                 "error": error,

@@ -79,7 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
     argparse.ArgumentParser
         ``prog="vcs"``; each subcommand sets ``func`` (its ``cmd_*`` function) and ``command``.
     """
-    p = _Parser(prog="vcs", description=__doc__.splitlines()[0])
+    p = _Parser(
+        prog="vcs",
+        description=__doc__.splitlines()[0],
+        epilog="exit codes: 0 done, 2 bad input or a refused output (one line says what to fix), "
+        "3 out of memory, 130 interrupted, 1 internal error (a bug; -v shows the traceback)",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr; tracebacks of internal errors")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for add_commands in _COMMAND_GROUPS:

@@ -1,10 +1,11 @@
 """Rule fields_sample: resample a finished case onto the patient's (tau, theta, rho_n) grid.
 
-Cases without a usable solution (failed at any earlier stage, or not converged and not even within
-the relaxed criterion of the time-averaged fallback) get placeholder outputs that only carry the
+Cases without a usable solution (failed at any earlier stage, or not converged: neither SIMPLE nor
+a stationary time average of the transient fallback) get placeholder outputs that only carry the
 reason and stage: the atlas excludes them from their status anyway. A case that cannot be
 resampled gets the same placeholder with stage ``sampling`` (a per-patient failure, not a job
-failure), which the atlas reads.
+failure), which the atlas reads. A time-averaged case is sampled from its means (U, p, WSS keep
+their names; TAWSS and OSI are added).
 """
 
 import json
@@ -49,8 +50,8 @@ def main(smk):
 
     with open(smk.input.status) as fh:
         status = json.load(fh)
-    # sample every case that has a solution (converged, or time-averaged within the relaxed
-    # criterion); whether the atlas includes the latter is its own option (atlas.accept_relaxed)
+    # sample every case that has a solution (converged: SIMPLE or a stationary time average; a
+    # legacy status with converged_relaxed too, which the atlas includes only with accept_relaxed)
     reason = status_exclusion(status, accept_relaxed=True)
     if reason is not None:
         log.warning("%s excluded, not resampled: %s", smk.wildcards.id, reason)
