@@ -67,7 +67,7 @@ def run_fits(out: Path) -> None:
         name = f"{kind}_seed{seed}"
         stl = out / "phantoms" / f"{name}.stl"
         stl.parent.mkdir(exist_ok=True)
-        _vcs("phantom", "--kind", kind, "--seed", str(seed), "--resolution", "1.5", "-o", str(stl))
+        _vcs("phantom", "--kind", kind, "--seed", str(seed), "--resolution", "1.5", "-o", str(stl), "--overwrite")
         _vcs("fit", str(stl), "-o", str(out / name), "--units", "mm")
         print(f"fitted {name}")
     if not SHARED.is_dir():

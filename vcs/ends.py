@@ -29,6 +29,7 @@ from vcs.mesh import (
     edge_topology,
     half_edges,
     lumen_chords,
+    plane_section,
     points_inside,
     polygon_properties,
     triangle_areas,
@@ -752,15 +753,29 @@ def _select(ends: EndList, sel: EndSelector, name: str, units: str) -> int:
     )
 
 
-def _snap(point: NDArray[np.floating], ends: EndList) -> int | None:
-    """Index of the cap or loop nearest ``point`` if within max(2 r, 5 mm) of its centre, else None."""
+def _snap(
+    point: NDArray[np.floating], ends: EndList, vertices: NDArray[np.floating], faces: NDArray[np.integer]
+) -> int | None:
+    """Index of the end ``point`` stands for, else None.
+
+    A cap or loop whose centre is within max(2 r, 5 mm) of ``point``; or a closed end (a rounded
+    or remeshed cap) within that distance when the plane through ``point`` across the end's axis
+    does not cut a full section of the vessel: the cut's radius is below 85 % of the end's (the
+    criterion of :func:`_full_section`), i.e. ``point`` lies on the cap. Its end plane would cut
+    across the cap, a small ring, not a section of the vessel (the vmtk segment's caps: rho_w
+    32 % of the lumen radius at tau = 0); the closed end's last full section is taken instead. A
+    point where the cut is full is the user's own end plane.
+    """
     best, best_d = None, np.inf
     for i, c in enumerate(ends.candidates):
-        if c.end.normal is None:
-            continue  # a closed end: the user's own point is kept
         d = float(np.linalg.norm(c.end.center - point))
-        if d <= max(2.0 * c.radius, 5.0) and d < best_d:
-            best, best_d = i, d
+        if d > max(2.0 * c.radius, 5.0) or d >= best_d:
+            continue
+        if c.end.normal is None:  # a closed end: only when the point is on its cap
+            _, r_cut = plane_section(vertices, faces, point, cast(NDArray[np.floating], c.normal), 2.0 * c.radius)
+            if r_cut is not None and r_cut >= 0.85 * c.radius:
+                continue
+        best, best_d = i, d
     return best
 
 
@@ -788,8 +803,9 @@ def find_ends(
     Otherwise the candidate ends are listed (:func:`list_ends`) and:
 
     * ``inlet``/``outlet`` given as :class:`EndSelector` (``end:N``, ``NAME=VALUE``) take that end;
-    * given as points, each takes the cap or loop within max(2 r, 5 mm) of it, or else is used as
-      an explicit point (its end plane then follows the lumen path);
+    * given as points, each takes the cap or loop within max(2 r, 5 mm) of it, or the closed end
+      within that distance when it lies on that end's cap (:func:`_snap`), or else is used as an
+      explicit point (its end plane then follows the lumen path);
     * only one given: the other is the other end of its kind when there are exactly two;
     * none given: exactly two labelled caps, else exactly two open loops, else exactly two ends of
       a closed surface (flat caps and closed ends) are the ends, the larger one the inlet
@@ -880,7 +896,7 @@ def find_ends(
             chosen[name] = _select(listing, spec, name, units)
         elif spec is not None:
             p = np.asarray(spec, float)
-            i = _snap(p, listing)
+            i = _snap(p, listing, vertices, faces)
             chosen[name] = p if i is None else i
     listed = describe_candidates(listing, units, limit=40)
 

@@ -7,6 +7,7 @@ records the factor so outputs can be given back in the units of the input mesh.
 from __future__ import annotations
 
 import logging
+import warnings as pywarnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -15,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vcs.errors import VCSInputError
-from vcs.mesh import consistent_winding, lumen_chords, triangle_cross
+from vcs.mesh import connected_faces, consistent_winding, default_vessel_component, lumen_chords, triangle_cross
 
 if TYPE_CHECKING:
     import pyvista as pv
@@ -253,6 +254,78 @@ def _read_polydata(path: Path) -> pv.PolyData:
     return mesh
 
 
+#: Vertices closer than this fraction of the median edge length are one vertex (:func:`read_surface`).
+MERGE_TOLERANCE = 1e-4
+
+
+def _merge_and_deduplicate(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], cell_data: dict[str, NDArray[Any]], warnings: list[str]
+) -> tuple[NDArray[np.floating], NDArray[np.integer], dict[str, NDArray[Any]]]:
+    """Merge duplicate vertices and drop repeated triangles, saying so in ``warnings``.
+
+    A triangle soup (every triangle with its own three vertices, as some PLY/OBJ/VTP exporters
+    write) has no shared edges: every edge would be a boundary and the surface one open end per
+    triangle. Vertices closer than :data:`MERGE_TOLERANCE` times the median edge length (far
+    below any real edge) are merged (scipy's KD-tree pairs, joined transitively). A triangle
+    listed twice (the same three vertices, in any order) makes its edges non-manifold and the
+    surface look closed; repeats after the first are dropped.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        Vertex coordinates (file units).
+    faces : (M, 3) int
+        Triangles.
+    cell_data : dict of str -> (M,) array
+        Cell arrays, kept per remaining triangle.
+    warnings : list of str
+        Appended to (in place) when something was merged or dropped.
+
+    Returns
+    -------
+    vertices : (N', 3) float
+        Without the merged copies (the same array when nothing was merged).
+    faces : (M', 3) int
+    cell_data : dict of str -> (M',) array
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    edge = np.linalg.norm(vertices[faces] - vertices[np.roll(faces, 1, axis=1)], axis=2)
+    tol = MERGE_TOLERANCE * float(np.median(edge[edge > 0])) if (edge > 0).any() else 0.0
+    used = np.unique(faces)
+    pairs = cKDTree(vertices[used]).query_pairs(tol, output_type="ndarray") if tol > 0 else np.zeros((0, 2), int)
+    if len(pairs):
+        n = len(used)
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        _, label = connected_components(graph, directed=False)
+        n_merged = n - int(label.max()) - 1
+        first = np.full(label.max() + 1, -1)
+        first[label[::-1]] = np.arange(n)[::-1]  # the lowest-numbered vertex of each group stays
+        remap = np.full(len(vertices), -1)
+        remap[used] = used[first[label]]
+        faces = remap[faces]
+        warnings.append(
+            f"{n_merged} duplicate vertices merged (closer than {tol:.2g} file units, "
+            f"{MERGE_TOLERANCE:g} of the median edge): the triangles were not connected"
+        )
+    key = np.sort(faces, axis=1)
+    _, first_face = np.unique(key, axis=0, return_index=True)
+    if len(first_face) < len(faces):
+        keep = np.zeros(len(faces), bool)
+        keep[first_face] = True
+        warnings.append(f"{int((~keep).sum())} repeated triangles removed (the same three vertices listed again)")
+        faces = faces[keep]
+        cell_data = {k: v[keep] for k, v in cell_data.items()}
+    if len(pairs):  # the merged copies are unused now: drop them (no other vertex is touched)
+        keep_v = np.ones(len(vertices), bool)
+        keep_v[used[used[first[label]] != used]] = False
+        renumber = np.cumsum(keep_v) - 1
+        vertices, faces = vertices[keep_v], renumber[faces]
+    return vertices, faces, cell_data
+
+
 def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = True) -> Surface:
     """Read a triangulated vessel wall (STL, VTP, VTK, PLY, OBJ) and convert it to mm.
 
@@ -310,6 +383,7 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
         if np.asarray(mesh.cell_data[name]).ndim == 1
     }
     warnings: list[str] = []
+    vertices, faces, cell_data = _merge_and_deduplicate(vertices, faces, cell_data, warnings)
     tri = vertices[faces]
     area2 = np.linalg.norm(triangle_cross(tri), axis=1)
     degenerate = (
@@ -329,8 +403,10 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
         warnings.append("inconsistent triangle winding repaired")
     extent = float(np.ptp(vertices, axis=0).max())
     evidence: dict[str, Any] = {}
-    if units == "auto":
-        guess = measure_units(vertices, faces)
+    if units == "auto":  # measured on the vessel's component, not on a larger blob of noise beside it
+        labels = connected_faces(faces, len(vertices))
+        one = labels == default_vessel_component(vertices, faces, labels)[0] if labels.max() > 0 else slice(None)
+        guess = measure_units(vertices, faces[one])
         units, source, evidence = guess.unit, guess.reason, guess.evidence
         if guess.warning:
             warnings.append(guess.warning)
@@ -377,7 +453,8 @@ def read_table_columns(
     """Read named columns of a CSV (or an (N, len(names)) ``.npy``) as an (N, len(names)) array.
 
     Without ``header_required``, a CSV whose first line does not name the columns is read as
-    headerless, its first ``len(names)`` columns in order.
+    headerless; it must then have exactly ``len(names)`` columns, in order (a fourth column is
+    refused rather than silently ignored). A header may name more columns than ``names``.
 
     Parameters
     ----------
@@ -398,7 +475,9 @@ def read_table_columns(
     Raises
     ------
     VCSInputError
-        For a missing file, missing columns, no data rows, or non-numeric or wrongly shaped data.
+        For a missing file, missing columns, no data rows (an empty CSV, a header-only CSV and an
+        empty ``.npy`` alike), a headerless CSV with another number of columns, NaN or infinite
+        values, or non-numeric or wrongly shaped data.
     """
     path = Path(path)
     if not path.is_file():
@@ -414,10 +493,16 @@ def read_table_columns(
                 raise VCSInputError(
                     f"'{path}' lacks column(s) {', '.join(missing)}; header must name {','.join(names)}"
                 )
-            arr = np.loadtxt(path, delimiter=",", skiprows=0 if missing else 1, ndmin=2)
-            if arr.size == 0:
-                raise VCSInputError(f"'{path}' has no data rows; give at least one row")
-            arr = arr[:, : len(names)] if missing else arr[:, [header.index(n) for n in names]]
+            with pywarnings.catch_warnings():  # an empty file: numpy warns, we say it in one line below
+                pywarnings.simplefilter("ignore")
+                arr = np.loadtxt(path, delimiter=",", skiprows=0 if missing else 1, ndmin=2)
+            if arr.size and missing and arr.shape[1] != len(names):
+                raise VCSInputError(
+                    f"'{path}' has {arr.shape[1]} columns and no header; give exactly {len(names)} columns "
+                    f"({','.join(names)}) or a header line naming them"
+                )
+            if arr.size:
+                arr = arr[:, : len(names)] if missing else arr[:, [header.index(n) for n in names]]
         arr = np.asarray(arr, dtype=float)
     except VCSInputError:
         raise
@@ -425,8 +510,16 @@ def read_table_columns(
         raise VCSInputError(
             f"cannot read '{path}' ({type(exc).__name__}: {exc}); give numeric {','.join(names)} columns"
         ) from None
+    if arr.size == 0:  # the same for an empty CSV, a header-only CSV and an empty .npy
+        raise VCSInputError(f"'{path}' has no data rows; give at least one row of {','.join(names)}")
     if arr.ndim != 2 or arr.shape[1] != len(names):
         raise VCSInputError(f"'{path}' holds an array of shape {arr.shape}; expected {len(names)} columns")
+    bad = ~np.isfinite(arr).all(axis=1)
+    if bad.any():
+        raise VCSInputError(
+            f"'{path}' has {int(bad.sum())} row(s) with NaN or infinite values (first: data row "
+            f"{int(np.argmax(bad)) + 1}); remove or fix them"
+        )
     return arr
 
 

@@ -21,6 +21,7 @@ __all__ = [
     "boundary_loops",
     "connected_faces",
     "consistent_winding",
+    "default_vessel_component",
     "edge_topology",
     "half_edges",
     "lumen_chords",
@@ -29,6 +30,7 @@ __all__ = [
     "points_inside",
     "polygon_properties",
     "read_stl_solids",
+    "self_intersections",
     "signed_volume",
     "triangle_areas",
     "triangle_cross",
@@ -432,6 +434,40 @@ def connected_faces(faces: NDArray[np.integer], n_vertices: int) -> NDArray[np.i
     return labels[faces[:, 0]]
 
 
+def default_vessel_component(
+    vertices: NDArray[np.floating], faces: NDArray[np.integer], labels: NDArray[np.integer] | None = None
+) -> tuple[int, bool]:
+    """The connected component taken for the vessel when no end point says which.
+
+    Among the (at most ten) largest components by area, the largest with at least two open ends
+    (boundary loops) - a vessel section is a tube -, else the largest: a closed blob of noise
+    larger than the vessel is not taken for it.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        Vertex coordinates.
+    faces : (M, 3) int
+        Triangles.
+    labels : (M,) int, optional
+        Component label of each face (:func:`connected_faces`), computed when not given.
+
+    Returns
+    -------
+    label : int
+        The chosen component's label.
+    not_largest : bool
+        True when a larger component (without two open ends) was passed over.
+    """
+    if labels is None:
+        labels = connected_faces(faces, len(vertices))
+    per = np.bincount(labels, triangle_areas(vertices, faces))
+    by_area = [int(c) for c in np.argsort(-per, kind="stable") if per[c] > 0][:10] or [0]
+    open_tubes = [c for c in by_area if len(boundary_loops(faces[labels == c])) >= 2]
+    pick = open_tubes[0] if open_tubes else by_area[0]
+    return pick, pick != by_area[0]
+
+
 def consistent_winding(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> tuple[NDArray[np.integer], bool]:
     """Make triangle winding consistent across shared manifold edges.
 
@@ -493,6 +529,100 @@ def consistent_winding(vertices: NDArray[np.floating], faces: NDArray[np.integer
     out = faces.copy()
     out[flip_mask] = out[flip_mask][:, ::-1]
     return out, True
+
+
+def self_intersections(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> NDArray[np.integer]:
+    """Triangles that another part of the surface passes through (the surface intersects itself).
+
+    Two triangles of a mesh cross when an edge of one passes through the other; an edge is
+    tested against every triangle that does not have one of its end points as a corner (so
+    neighbours sharing an edge or a vertex never count) and whose bounding box overlaps the
+    edge's (broad phase on a uniform grid of one median edge; each pair is tested once, in the
+    cell of the larger lower corner of the two boxes). The segment-triangle test is
+    Moeller-Trumbore's, strictly inside both (a margin of 1e-6 in the barycentric and segment
+    parameters): touching and T-junctions are not crossings, coplanar overlaps are not found.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        Vertex coordinates (any length unit).
+    faces : (M, 3) int
+        Triangles.
+
+    Returns
+    -------
+    (K,) int
+        Sorted indices of the triangles that cross another triangle (empty for a surface that
+        does not intersect itself).
+    """
+    if len(faces) < 2:
+        return np.zeros(0, np.int64)
+    edges, _ = edge_topology(faces)
+    p0, p1 = vertices[edges[:, 0]], vertices[edges[:, 1]]
+    tri = vertices[faces]
+    length = np.linalg.norm(p1 - p0, axis=1)
+    h = float(np.median(length[length > 0])) if (length > 0).any() else 1.0
+    origin = vertices.min(axis=0)
+    span = np.floor((vertices.max(axis=0) - origin) / h).astype(np.int64) + 2
+    e_lo, e_hi = np.minimum(p0, p1) - origin, np.maximum(p0, p1) - origin
+    t_lo, t_hi = tri.min(axis=1) - origin, tri.max(axis=1) - origin
+    e_own, e_cell = _grid_entries(e_lo, e_hi, h, span)
+    t_own, t_cell = _grid_entries(t_lo, t_hi, h, span)
+    order = np.argsort(t_cell, kind="stable")
+    t_sorted, t_owner = t_cell[order], t_own[order]
+    start = np.searchsorted(t_sorted, e_cell, "left")
+    count = np.searchsorted(t_sorted, e_cell, "right") - start
+    pe = np.repeat(e_own, count)
+    pt = t_owner[np.repeat(start, count) + np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)]
+    cell = np.repeat(e_cell, count)
+    # each pair once: in the cell that holds the larger of the two boxes' lower corners, and
+    # only when the boxes overlap
+    corner = np.floor(np.maximum(e_lo[pe], t_lo[pt]) / h).astype(np.int64)
+    keep = (corner[:, 0] * span[1] + corner[:, 1]) * span[2] + corner[:, 2] == cell
+    keep &= np.all(np.minimum(e_hi[pe], t_hi[pt]) >= np.maximum(e_lo[pe], t_lo[pt]), axis=1)
+    pe, pt = pe[keep], pt[keep]
+    f = faces[pt]
+    a, b = edges[pe, 0:1], edges[pe, 1:2]
+    keep = ~((f == a) | (f == b)).any(axis=1)
+    pe, pt = pe[keep], pt[keep]
+    # Moeller-Trumbore, segment p0 -> p1 against triangle (v0, v1, v2)
+    d = p1[pe] - p0[pe]
+    v0, e1, e2 = tri[pt, 0], tri[pt, 1] - tri[pt, 0], tri[pt, 2] - tri[pt, 0]
+    q = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, q)
+    scale = np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    ok = np.abs(det) > 1e-9 * np.maximum(scale, 1e-300)
+    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    sv = p0[pe] - v0
+    u = np.einsum("ij,ij->i", sv, q) * inv
+    r = np.cross(sv, e1)
+    v = np.einsum("ij,ij->i", d, r) * inv
+    t = np.einsum("ij,ij->i", e2, r) * inv
+    eps = 1e-6
+    hit = ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (t > eps) & (t < 1 - eps)
+    # the triangles on both sides of each crossing: the one crossed and those sharing the edge
+    crossed = pt[hit]
+    ef = half_edges(faces)
+    he_key = np.sort(ef[0], axis=1).astype(np.int64)
+    n_v = int(faces.max()) + 1
+    e_hit = np.unique(edges[pe[hit]].astype(np.int64) @ np.array([n_v, 1]))
+    crossing = ef[1][np.isin(he_key @ np.array([n_v, 1]), e_hit)]
+    return np.unique(np.concatenate([crossed, crossing])).astype(np.int64)
+
+
+def _grid_entries(
+    lo: NDArray[np.floating], hi: NDArray[np.floating], h: float, span: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The cells of a uniform grid (size ``h``, ``span`` cells per axis from the origin) that each
+    axis-aligned box [``lo``, ``hi``] (non-negative coordinates) overlaps: (box index, cell key) pairs."""
+    a = np.floor(lo / h).astype(np.int64)
+    dims = np.floor(hi / h).astype(np.int64) - a + 1
+    n = dims.prod(axis=1)
+    owner = np.repeat(np.arange(len(lo)), n)
+    off = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    dy, dz = dims[owner, 1], dims[owner, 2]
+    cell = a[owner] + np.column_stack([off // (dy * dz), (off // dz) % dy, off % dz])
+    return owner, (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
 
 
 def orient_outward(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> NDArray[np.integer]:
@@ -693,3 +823,45 @@ def write_points_vtp(path: str | Path, points: ArrayLike, point_data: dict[str, 
     for name, values in (point_data or {}).items():
         poly.point_data[name] = np.asarray(values)
     poly.save(str(path))
+
+
+def plane_section(
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    p: NDArray[np.floating],
+    n: NDArray[np.floating],
+    r_max: float,
+) -> tuple[NDArray[np.floating] | None, float | None]:
+    """Centroid and equivalent radius of the wall's cut by the plane (p, n), within r_max of p.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float, mm
+    faces : (M, 3) int
+    p : (3,) float, mm
+        A point of the plane.
+    n : (3,) float
+        Unit normal of the plane.
+    r_max : float, mm
+        Only crossings within this distance of ``p`` count.
+
+    Returns
+    -------
+    center : (3,) float, mm, or None
+        Mean of the edge crossings (None when fewer than 3).
+    radius : float, mm, or None
+        Median distance of the crossings to ``center``.
+    """
+    sd = (vertices - p) @ n
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    a, b = sd[e[:, 0]], sd[e[:, 1]]
+    cross = (a * b) < 0
+    ea, eb = e[cross, 0], e[cross, 1]
+    w = (a[cross] / (a[cross] - b[cross]))[:, None]
+    on = np.abs(sd) <= 1e-9 * max(float(np.ptp(vertices)), 1.0)  # vertices lying in the plane
+    x = np.vstack([vertices[ea] + w * (vertices[eb] - vertices[ea]), vertices[np.unique(faces)[on[np.unique(faces)]]]])
+    x = x[np.linalg.norm(x - p, axis=1) < r_max]
+    if len(x) < 3:
+        return None, None
+    c = x.mean(axis=0)
+    return c, float(np.median(np.linalg.norm(x - c, axis=1)))

@@ -16,6 +16,7 @@ from vcs.centerline import (
     curve_length,
     end_tangents,
     fit_centerline,
+    fit_to_curve,
     interior_samples,
     lumen_path,
     lumen_voxels,
@@ -30,6 +31,12 @@ from vcs.frame import ParallelTransportFrame, initial_v1_from_wall, wall_centroi
 from vcs.mesh import point_triangle_distance
 
 log = logging.getLogger(__name__)
+
+#: Smoothing length of the working centerline, in median lumen radii (:func:`vcs.centerline.fit_spline`):
+#: the section centres' wiggles shorter than pi radii (ostia of side branches, a bumpy
+#: marching-cubes wall) are damped, the bends of a vessel (wavelengths of 2 pi times a curvature
+#: radius >= 1.5 lumen radii, i.e. > 9 radii) are kept.
+SMOOTHING_RADII = 0.5
 
 
 class VesselCoordinateSystem:
@@ -85,13 +92,13 @@ class VesselCoordinateSystem:
 
         The steps, each a function of :mod:`vcs.centerline` or :mod:`vcs.frame`: lumen voxels and
         their distance d to the wall; the lowest-cost path (cost 1/d) from p_A to p_B; a working
-        spline (:func:`vcs.centerline.working_knots` knots, one span per 0.75 lumen radius)
-        re-centred on the wall's cross-sections (beyond the paper,
-        :func:`vcs.centerline.section_centres`); the centerline with L knots fitted to those
-        centres and re-parametrised by arc length (Eq. 1), L given or chosen
-        (:func:`vcs.centerline.choose_n_knots`); v1(0) from the wall centroid and the
-        parallel-transport frame. With ``recentre_iterations`` = 0 the centerline is fitted to
-        the lumen path itself (the paper's curve).
+        spline (:func:`vcs.centerline.working_knots` knots, one span per lumen radius, smoothed
+        over :data:`SMOOTHING_RADII` median lumen radii) re-centred on the wall's cross-sections
+        (beyond the paper, :func:`vcs.centerline.section_centres`); the centerline with L knots
+        fitted to that curve at equal arc length (Eq. 1, :func:`vcs.centerline.fit_to_curve`),
+        L given or chosen (:func:`vcs.centerline.choose_n_knots`); v1(0) from the wall centroid
+        and the parallel-transport frame. With ``recentre_iterations`` = 0 and L given, the
+        centerline is fitted to the lumen path itself (the paper's curve).
 
         Parameters
         ----------
@@ -140,22 +147,32 @@ class VesselCoordinateSystem:
         radius = float(np.median(lumen.distance_at(path)))
         L_work = working_knots(path_len, radius, edge)
         L_work = min(L_work, max(9, len(path) // 2))
-        working = fit_centerline(pts, L_work, end_directions=dirs)
+        ell = SMOOTHING_RADII * radius
+        working = fit_centerline(pts, L_work, end_directions=dirs, smoothing_mm=ell)
         t_fit = time.perf_counter()
         shifts: list[float] = []
         data = pts
-        if recentre_iterations > 0:
-            working, shifts, data = section_centres(
-                working, vertices, wall_faces, iterations=recentre_iterations, end_directions=dirs
+        short = path_len < 2.0 * radius
+        if short:  # no longer than its diameter: no room for a bend, and too few voxels to follow
+            data = inlet.center + np.linspace(0.0, 1.0, 17)[:, None] * (outlet.center - inlet.center)
+            working = fit_centerline(data, L_work, end_directions=dirs)
+        elif recentre_iterations > 0:
+            working, shifts, _ = section_centres(
+                working,
+                vertices,
+                wall_faces,
+                iterations=recentre_iterations,
+                end_directions=dirs,
+                smoothing_mm=ell,
             )
         t_recentre = time.perf_counter()
         choice = None
         if auto:
-            choice = choose_n_knots(
-                data, lumen, working, end_directions=dirs, max_knots=max(9, min(L_work, len(data) // 2))
-            )
+            choice = choose_n_knots(working, lumen, end_directions=dirs, max_knots=max(9, L_work))
             curve = choice.curve
-        else:
+        elif recentre_iterations > 0 and not short:
+            curve = fit_to_curve(working, int(n_knots), end_directions=dirs)
+        else:  # the paper's curve: least squares to the lumen path (a short section: its chord)
             curve = fit_centerline(data, int(n_knots), end_directions=dirs)
         t_choose = time.perf_counter()
         v1_0, how = initial_v1_from_wall(curve, wall_centroid(vertices, wall_faces))
@@ -175,6 +192,8 @@ class VesselCoordinateSystem:
             _centerline_checks(curve, working, lumen, vertices[wall_faces]),
             L_source="auto" if auto else "given",
             L_working=int(L_work),
+            centerline_smoothing_mm=ell,
+            short_section=bool(short),
         )
         if choice is not None:
             self.report["L_auto"] = {
@@ -184,7 +203,7 @@ class VesselCoordinateSystem:
                 "tried": choice.trials,
             }
         if not self.report["centerline_inside_lumen"]:
-            log.warning(
+            log.info(  # in fit_report.json: warnings and quality_reasons (vcs.vessel.fit_vessel)
                 "centerline leaves the voxelised lumen (min distance %.3f mm)",
                 self.report["centerline_min_wall_distance_mm"],
             )

@@ -151,8 +151,8 @@ def wall_mesh(
     Raises
     ------
     VCSInputError
-        When the model has no wall model, for n_theta < 8 or n_tau < 1, or a cap that cannot
-        be triangulated.
+        When the model has no wall model, for n_theta < 8, n_tau < 1, a negative or non-finite
+        extension, or a cap that cannot be triangulated.
     """
     if model.wall is None:
         raise VCSInputError("the model has no wall model; refit it with `vcs fit` (K, R)")
@@ -160,6 +160,9 @@ def wall_mesh(
         raise VCSInputError(f"--n-theta {n_theta} is too small; use at least 8")
     if n_tau is not None and n_tau < 1:
         raise VCSInputError(f"--n-tau {n_tau} must be at least 1")
+    for name, ext in (("inlet", extend_inlet), ("outlet", extend_outlet)):
+        if not np.isfinite(ext) or ext < 0:
+            raise VCSInputError(f"--extend-{name} {ext} must be a length >= 0 (in diameters)")
     vcs = model.vcs
     theta = np.linspace(0, TWO_PI, n_theta, endpoint=False)
     r_mean = float(model.wall(np.linspace(0, 1, 50)[:, None], theta[None, :]).mean())

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vcs.ends import find_ends, parse_end_option
+from vcs.ends import EndSelector, find_ends, parse_end_option
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
-from vcs.mesh import connected_faces, triangle_areas
+from vcs.mesh import connected_faces, default_vessel_component, self_intersections, triangle_areas
 from vcs.model import VesselCoordinateSystem
 from vcs.wall import WallFit, WallModel, fit_wall
 
@@ -216,10 +216,11 @@ class VesselModel:
         Raises
         ------
         VCSInputError
-            When ``format_version`` is not the one this code writes, or the wall model's sizes do
-            not match.
+            When ``format_version`` is not the one this code writes, or an array has the wrong
+            shape or a NaN or infinite value (:func:`_check_arrays`).
         """
         _check_format_version(d)
+        _check_arrays(d)
         wall = None if d.get("wall") is None else WallModel.from_dict(d["wall"])
         return cls(VesselCoordinateSystem.from_dict(d["centerline"]), wall, d["units"]["input"], d.get("meta", {}))
 
@@ -285,6 +286,57 @@ class VesselModel:
             ) from None
 
 
+def _array(value: Any, what: str, shape: tuple[int | None, ...]) -> NDArray[np.floating]:
+    """``value`` as a finite float array of ``shape`` (None: any length), else VCSInputError naming ``what``."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise VCSInputError(f"{what} is not an array of numbers") from None
+    if a.ndim != len(shape) or any(n is not None and a.shape[i] != n for i, n in enumerate(shape)):
+        want = "(" + ", ".join("n" if n is None else str(n) for n in shape) + ")"
+        raise VCSInputError(f"{what} has shape {a.shape}, expected {want}")
+    n_bad = int((~np.isfinite(a)).sum())
+    if n_bad:
+        raise VCSInputError(f"{what} holds {n_bad} NaN or infinite value(s)")
+    return a
+
+
+def _check_arrays(d: dict[str, Any]) -> None:
+    """Check the arrays of a parsed model.json: shapes that fit together, finite numbers.
+
+    The centerline: ``degree`` 3, ``knots`` clamped on [0, 1] and non-decreasing with L + 8
+    entries, ``control_points`` (L + 4, 3), ``v1_0`` (3,) of unit length; the wall (when present):
+    ``K``, ``R`` >= 1 and ``coefficients`` (K + 4, R + 1). Every number finite (a hand-edited
+    file with a NaN would otherwise fail deep inside a command).
+
+    Raises
+    ------
+    VCSInputError
+        Naming the first entry that is wrong (the caller adds the file name).
+    """
+    c = d["centerline"]
+    if not isinstance(c, dict):
+        raise VCSInputError("'centerline' is not an object")
+    if c.get("degree") != 3:
+        raise VCSInputError(f"centerline degree is {c.get('degree')!r}, expected 3")
+    t = _array(c.get("knots"), "centerline knots", (None,))
+    if len(t) < 8 or np.any(np.diff(t) < 0) or np.any(t[:4] != 0.0) or np.any(t[-4:] != 1.0):
+        raise VCSInputError("centerline knots are not a clamped, non-decreasing knot vector on [0, 1]")
+    _array(c.get("control_points"), "centerline control_points", (len(t) - 4, 3))
+    v1 = _array(c.get("v1_0"), "centerline v1_0", (3,))
+    if abs(float(np.linalg.norm(v1)) - 1.0) > 1e-6:
+        raise VCSInputError(f"centerline v1_0 has length {np.linalg.norm(v1):.6g}, expected a unit vector")
+    w = d.get("wall")
+    if w is None:
+        return
+    if not isinstance(w, dict):
+        raise VCSInputError("'wall' is not an object")
+    K, R = w.get("K"), w.get("R")
+    if not (isinstance(K, int) and isinstance(R, int) and K >= 1 and R >= 1):
+        raise VCSInputError(f"wall K = {K!r}, R = {R!r}: expected integers >= 1")
+    _array(w.get("coefficients"), "wall coefficients", (K + 4, R + 1))
+
+
 def _check_format_version(d: dict[str, Any]) -> None:
     """Raise VCSInputError unless a model dict has this code's ``format_version``."""
     version = d.get("format_version")
@@ -294,18 +346,30 @@ def _check_format_version(d: dict[str, Any]) -> None:
         )
 
 
-def largest_component(surf: Surface) -> Surface:
-    """Keep the connected component of largest area; the others are reported in ``warnings``.
+def vessel_component(
+    surf: Surface, inlet: ArrayLike | EndSelector | None = None, outlet: ArrayLike | EndSelector | None = None
+) -> Surface:
+    """Keep the connected component that is the vessel; the others are reported in ``warnings``.
+
+    Which component: the one nearest the ``inlet`` and ``outlet`` points when points are given
+    (smallest sum of distances to its vertices); the one holding the cap of a ``NAME=VALUE``
+    selector; otherwise, among the components with at least two open ends (boundary loops),
+    the largest by area, and the largest of all when none has two
+    (:func:`vcs.mesh.default_vessel_component`). A closed blob of noise larger
+    than an open vessel is thus not taken for the vessel; between two open tubes, the points
+    decide (the warning says so).
 
     Parameters
     ----------
     surf : Surface
         Triangulated surface (mm).
+    inlet, outlet : (3,) float in mm, EndSelector, or None
+        The parsed ``--inlet``/``--outlet`` (points already converted to mm).
 
     Returns
     -------
     Surface
-        ``surf`` itself when it is connected; otherwise the largest-area component, its unused
+        ``surf`` itself when it is connected; otherwise the chosen component, its unused
         vertices dropped and faces renumbered, cell arrays kept per face, one warning added.
     """
     f = surf.faces
@@ -316,11 +380,34 @@ def largest_component(surf: Surface) -> Surface:
         return surf
     area = triangle_areas(surf.vertices, f)
     per = np.bincount(face_lab, area)
-    keep_lab = int(np.argmax(per))
+    points = [np.asarray(p, float) for p in (inlet, outlet) if isinstance(p, np.ndarray)]
+    labels = [p for p in (inlet, outlet) if isinstance(p, EndSelector) and p.array and p.array in surf.cell_data]
+    if points:
+        from scipy.spatial import cKDTree
+
+        vert_lab = np.full(n, -1)
+        vert_lab[f.ravel()] = np.repeat(face_lab, 3)
+        dist = np.full(len(per), np.inf)
+        for c in used:
+            tree = cKDTree(surf.vertices[vert_lab == c])
+            dist[c] = sum(float(tree.query(p)[0]) for p in points)
+        keep_lab = int(np.argmin(dist))
+        why = "the one nearest --inlet/--outlet"
+    elif labels and np.any(hit := surf.cell_data[str(labels[0].array)] == labels[0].value):
+        keep_lab = int(np.bincount(face_lab[hit]).argmax())
+        why = f"the one with the cap {labels[0].label}"
+    else:
+        keep_lab, not_largest = default_vessel_component(surf.vertices, f, face_lab)
+        if not_largest:
+            why = "the largest with two open ends, not the largest overall; give --inlet/--outlet points to choose"
+        else:
+            why = "the largest; give --inlet/--outlet points to choose another"
     keep = face_lab == keep_lab
+    dropped = np.delete(per, keep_lab)
     msg = (
-        f"{len(used)} disconnected surface components; kept the largest ({keep.sum()} triangles, "
-        f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles"
+        f"{len(used)} disconnected surface components; kept {why} ({int(keep.sum())} triangles, "
+        f"{100 * per[keep_lab] / per.sum():.1f}% of the area), dropped {int((~keep).sum())} triangles "
+        f"in {len(used) - 1} other component(s) (the largest {100 * dropped.max() / per.sum():.1f}% of the area)"
     )
     # drop the other components' vertices too: they must not size the voxel grid
     kept_v = np.unique(f[keep])
@@ -387,8 +474,9 @@ def fit_vessel(
 ) -> tuple[VesselModel, dict[str, Any], WallFit | None]:
     """Fit the VCS (and the wall model when K and R are given) to a surface file or :class:`Surface`.
 
-    Reads and cleans the mesh (largest component), finds the two ends (Section 2.2.1), builds the
-    centerline and frame (Sections 2.2.1-2.2.2) and fits rho_w (Section 2.3.1, Eqs. 5-7).
+    Reads and cleans the mesh (the vessel's component, :func:`vessel_component`), finds the two
+    ends (Section 2.2.1), builds the centerline and frame (Sections 2.2.1-2.2.2) and fits rho_w
+    (Section 2.3.1, Eqs. 5-7).
 
     Parameters
     ----------
@@ -423,10 +511,14 @@ def fit_vessel(
     """
     t0 = time.perf_counter()
     surf = mesh if isinstance(mesh, Surface) else read_surface(mesh, units)
-    surf = largest_component(surf)
-    s = surf.scale_to_mm
     p_in = parse_end_option(inlet, "inlet")
     p_out = parse_end_option(outlet, "outlet")
+    s = surf.scale_to_mm
+    surf = vessel_component(
+        surf,
+        p_in * s if isinstance(p_in, np.ndarray) else p_in,
+        p_out * s if isinstance(p_out, np.ndarray) else p_out,
+    )
     if isinstance(p_in, np.ndarray) and isinstance(p_out, np.ndarray) and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
     caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
@@ -449,14 +541,20 @@ def fit_vessel(
         units=surf.units,
     )
     t_read = time.perf_counter()
-    vcs = VesselCoordinateSystem.from_surface(
-        surf.vertices, surf.faces, ends, n_knots=L, recentre_iterations=recentre_iterations
-    )
-    t_vcs = time.perf_counter()
-    wall_fit = None
-    if K is not None and R is not None:
-        wall_faces = surf.faces[ends.wall_mask]
-        wall_fit = fit_wall(vcs, surf.vertices, wall_faces, K=K, R=R)
+    try:
+        vcs = VesselCoordinateSystem.from_surface(
+            surf.vertices, surf.faces, ends, n_knots=L, recentre_iterations=recentre_iterations
+        )
+        t_vcs = time.perf_counter()
+        wall_fit = None
+        if K is not None and R is not None:
+            wall_faces = surf.faces[ends.wall_mask]
+            wall_fit = fit_wall(vcs, surf.vertices, wall_faces, K=K, R=R)
+    except VCSInputError as exc:  # a surface crossing itself is the cause to name, if it is one
+        crossing = self_intersection_message(surf)
+        if crossing:
+            raise VCSInputError(f"{crossing}; repair the mesh (the fit stopped: {exc})") from None
+        raise
     t_wall = time.perf_counter()
     warnings = [*surf.warnings, *ends.warnings]
     if wall_fit is not None:
@@ -472,6 +570,11 @@ def fit_vessel(
                 f"{n_out} wall points ({100 * n_out / wr['n_wall_points']:.1f}%) are outside Omega "
                 "(lumen radius above the centerline's radius of curvature, or closest point not unique)"
             )
+    if not vcs.report["centerline_inside_lumen"]:
+        warnings.append(
+            f"the centerline leaves the lumen (minimum wall distance "
+            f"{vcs.report['centerline_min_wall_distance_mm']:.3f} mm): the fit is poor, see quality_reasons"
+        )
     if vcs.report.get("L_auto", {}).get("criteria_met") is False:
         warnings.append(
             f"--L auto: no L up to {vcs.report['L_working']} keeps |c'| within 2 % inside the lumen; "
@@ -491,6 +594,13 @@ def fit_vessel(
         report.update(wall_fit.report)
         report.update(wall_quality(wall_fit))
     report.update(fit_quality(report))
+    # a surface crossing itself shows as a poor fit, points outside Omega or not star-convex:
+    # only then is the (0.2-2 s) self-intersection test run
+    if report["quality"] == "poor" or report.get("points_not_used", {}).get("outside_omega"):
+        crossing = self_intersection_message(surf, report)
+        if crossing:
+            warnings.append(crossing)
+            report.update(fit_quality(report))
     report["timings_s"] = {
         "read_and_ends": t_read - t0,
         **vcs.report["timings_s"],
@@ -510,6 +620,35 @@ def fit_vessel(
     }
     model = VesselModel(vcs, None if wall_fit is None else wall_fit.model, surf.units, meta)
     return model, report, wall_fit
+
+
+def self_intersection_message(surf: Surface, report: dict[str, Any] | None = None) -> str | None:
+    """One line saying that (and where) the surface intersects itself, or None when it does not.
+
+    Parameters
+    ----------
+    surf : Surface
+        The vessel's surface (mm).
+    report : dict, optional
+        Fit report: gains ``self_intersecting_triangles`` (a count, 0 when none), which
+        :func:`fit_quality` turns into a quality reason.
+
+    Returns
+    -------
+    str or None
+    """
+    crossing = self_intersections(surf.vertices, surf.faces)
+    if report is not None:
+        report["self_intersecting_triangles"] = int(len(crossing))
+    if not len(crossing):
+        return None
+    s = surf.scale_to_mm
+    c = surf.vertices[surf.faces[crossing]].mean(axis=(0, 1)) / s
+    return (
+        f"the surface intersects itself: {len(crossing)} triangles cross another part of the wall "
+        f"(around ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}) {surf.units}); the lumen, centerline and wall "
+        "model are not reliable there"
+    )
 
 
 #: Limits of :func:`fit_quality` (dimensionless): beyond any of them a fit is ``poor``.
@@ -574,7 +713,8 @@ def wall_quality(wall_fit: WallFit, n_tau: int = 201, n_theta: int = 64) -> dict
 def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) -> dict[str, Any]:
     """``quality`` (``ok`` or ``poor``) and ``quality_reasons`` (one line each) of a fit report.
 
-    A fit is poor when the centerline leaves the lumen or comes within a quarter of the local
+    A fit is poor when the surface intersects itself (``self_intersecting_triangles``, set by
+    :func:`self_intersection_message`), when the centerline leaves the lumen or comes within a quarter of the local
     lumen radius of the wall, when tau is not the arc length of paper Section 2.2.1 (|c'| varies
     by more than 5 %), when the wall model rho_w (Eq. 5) reaches zero or falls below half the
     local lumen radius, when less than a quarter of the wall points between the end planes, or
@@ -596,6 +736,11 @@ def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) 
     """
     lim = {**QUALITY_LIMITS, **(limits or {})}
     why: list[str] = []
+    if report.get("self_intersecting_triangles"):
+        why.append(
+            f"the surface intersects itself ({report['self_intersecting_triangles']} triangles cross another "
+            "part of the wall): repair the mesh"
+        )
     d = report["centerline_min_wall_distance_mm"]
     if not report["centerline_inside_lumen"]:
         why.append(f"the centerline leaves the lumen (minimum wall distance {d:.3f} mm); use more knots (--L auto)")

@@ -315,6 +315,53 @@ class WallFit:
 REASONS = {0: "used", 1: "beyond_end_planes", 2: "outside_omega", 3: "not_first_crossing", 4: "branch"}
 
 
+def _too_few_points_message(
+    vcs: VesselCoordinateSystem, rho: NDArray[np.floating], tri: NDArray[np.floating], n: int, K: int, R: int
+) -> str:
+    """The one-line error when fewer wall vertices than wall coefficients lie inside the section.
+
+    Two causes, told apart by the knot span along tau, length / (K + 1): a section shorter than
+    (K + 1) / 2 lumen radii is too short for K (the README's rule is K + 1 ~ length / radius; a
+    smaller K is the fix, a finer mesh would only fit noise); otherwise the mesh is coarse for
+    the knot spans (remesh finer, or lower K/R).
+
+    Parameters
+    ----------
+    vcs : VesselCoordinateSystem
+        The section's coordinate system (mm).
+    rho : (n,) float, mm
+        Radii of the usable wall vertices.
+    tri : (M, 3, 3) float, mm
+        Wall triangles.
+    n : int
+        Number of usable wall vertices.
+    K, R : int
+        Interior knots in tau and theta.
+
+    Returns
+    -------
+    str
+    """
+    n_min = (K + 4) * (R + 1)
+    length = float(vcs.length)
+    radius = float(np.median(rho)) if len(rho) else float("nan")
+    edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).mean()) if len(tri) else float("nan")
+    head = f"only {n} wall vertices lie inside the section, fewer than the {n_min} wall coefficients (K={K}, R={R})"
+    k_max = n // (R + 1) - 4  # the largest K these vertices can determine with this R
+    if np.isfinite(radius) and length < 0.5 * (K + 1) * radius:
+        k_rule = max(1, int(round(length / radius)) - 1)
+        fix = f"give --K {max(1, min(k_rule, k_max))}" if k_max >= 1 else "give a smaller --K and --R"
+        return (
+            f"{head}: the section is only {length:.3g} mm long ({length / radius:.2g} lumen radii of "
+            f"{radius:.3g} mm), too short for K={K} (knots {length / (K + 1):.2g} mm apart, mesh edges "
+            f"{edge:.2g} mm); {fix} (K + 1 ~ length / radius)"
+        )
+    return (
+        f"{head}: the mesh is too coarse (edges {edge:.2g} mm for wall knots {length / (K + 1):.2g} mm apart "
+        f"along a {length:.3g} mm section); remesh it finer or lower --K/--R"
+    )
+
+
 def fit_wall(
     vcs: VesselCoordinateSystem,
     vertices: NDArray[np.floating],
@@ -412,10 +459,7 @@ def fit_wall(
 
     n_min = (K + 4) * (R + 1)
     if (reason == 0).sum() < n_min:
-        raise VCSInputError(
-            f"only {(reason == 0).sum()} wall vertices lie inside the section, fewer than the {n_min} wall "
-            f"coefficients (K={K}, R={R}); the mesh is too coarse: remesh it finer or lower --K/--R"
-        )
+        raise VCSInputError(_too_few_points_message(vcs, rho[reason == 0], tri, int((reason == 0).sum()), K, R))
     adj = vertex_adjacency(faces, len(vertices))
     # branch regions are grown by ~ grow_rel x the vessel radius (the ostium's flare), in rings
     edge_len = np.linalg.norm(tri[:, 0] - tri[:, 1], axis=1).mean()
@@ -432,7 +476,12 @@ def fit_wall(
         ok = np.isfinite(med)
         return np.interp(np.arange(n_bins), np.flatnonzero(ok), med[ok]) if ok.any() else med
 
-    anchors = _end_sections(vcs, vertices, faces, float(np.nanmedian(rho[reason == 0])))
+    kept_tau = np.nan_to_num(tau[reason == 0])
+    end_radii = [
+        float(np.median(rho[reason == 0][near])) if near.sum() >= 8 else float(np.nanmedian(rho[reason == 0]))
+        for near in (kept_tau < 0.02, kept_tau > 0.98)
+    ]
+    anchors = _end_sections(vcs, vertices, faces, float(np.nanmedian(rho[reason == 0])), end_radii)
     w_anchor = float(np.median(w[reason == 0]))
 
     def fit() -> WallModel:
@@ -533,7 +582,11 @@ def _regions_with_seeds(
 
 
 def _end_sections(
-    vcs: VesselCoordinateSystem, vertices: NDArray[np.floating], faces: NDArray[np.integer], radius: float
+    vcs: VesselCoordinateSystem,
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    radius: float,
+    end_radii: tuple[float, float] | list[float] | None = None,
 ) -> tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]:
     """(tau, theta, rho) of the wall's cuts by the two end planes (paper Section 2.2.1 end planes).
 
@@ -549,6 +602,9 @@ def _end_sections(
         Wall triangles.
     radius : float, mm
         Typical lumen radius (search radius around the end centres).
+    end_radii : (2,) float, mm, or None
+        Median radius of the wall just inside each end: crossings beyond 1.5 times it are not
+        the section's ring (None: no such limit).
 
     Returns
     -------
@@ -558,7 +614,7 @@ def _end_sections(
     out: list[list[float]] = [[], [], []]
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     e = np.unique(np.sort(e, axis=1), axis=0)
-    for t_end in (0.0, 1.0):
+    for t_end, r_end in zip((0.0, 1.0), end_radii if end_radii is not None else (np.inf, np.inf)):
         t, v1, v2 = (a[0] for a in vcs.frame(np.array([t_end])))
         c = vcs.curve(t_end)
         sd = (vertices - c) @ t
@@ -567,7 +623,18 @@ def _end_sections(
         wgt = (a[cross] / (a[cross] - bb[cross]))[:, None]
         x = vertices[e[cross, 0]] + wgt * (vertices[e[cross, 1]] - vertices[e[cross, 0]]) - c
         x = x[np.linalg.norm(x, axis=1) < 2.5 * radius]
-        out[0].extend([t_end] * len(x))
-        out[1].extend(np.mod(np.arctan2(x @ v2, x @ v1), TWO_PI))
-        out[2].extend(np.linalg.norm(x, axis=1))
+        th = np.mod(np.arctan2(x @ v2, x @ v1), TWO_PI)
+        rho = np.linalg.norm(x, axis=1)
+        # the section's own ring only: the plane may also cut another part of the vessel within
+        # 2.5 radii (the ascending aorta next to a descending outlet: anchors at 40 mm pulled
+        # rho_w to 41 mm at the outlet of a 17 mm aorta phantom); crossings beyond 1.5 times the
+        # wall's radius just inside the end, or, per 10 deg sector, beyond 1.3 times the nearest
+        # crossing, are that other wall (the ring of an open end lying in the plane has none)
+        sector = np.minimum((th / (TWO_PI / 36)).astype(int), 35)
+        nearest = np.full(36, np.inf)
+        np.minimum.at(nearest, sector, rho)
+        keep = (rho <= 1.3 * nearest[sector]) & (rho <= 1.5 * r_end)
+        out[0].extend([t_end] * int(keep.sum()))
+        out[1].extend(th[keep])
+        out[2].extend(rho[keep])
     return np.array(out[0]), np.array(out[1]), np.array(out[2])

@@ -63,3 +63,23 @@ def shared_data():
     if not DATA.is_dir():
         pytest.skip(f"real vessel meshes not available ({DATA} is absent)")
     return DATA
+
+
+def vcs_in_process(*args):
+    """`vcs ARGS` run in this process (no interpreter start-up: ~50x faster than a subprocess for
+    argument and path errors): a CompletedProcess with the exit code, stdout and stderr; argparse's
+    SystemExit is caught like a process exit. An exception escaping main() is a failure of the test."""
+    import contextlib
+    import io
+    import subprocess
+
+    from vcs.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    argv = [str(a) for a in args]
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    return subprocess.CompletedProcess(argv, code, out.getvalue(), err.getvalue())

@@ -251,6 +251,32 @@ def test_blunt_closed_ends_of_a_capsule(tmp_path):
     assert rep["ends_method"] == "closed_ends" and 105 < rep["centerline_length_mm"] < 138
 
 
+def test_points_on_rounded_caps_take_the_last_full_section(tmp_path):
+    """Issue 10 (vmtk segment, rho_w 32 % of the radius at tau = 0): a point on a rounded cap put
+    the end plane across the cap, whose cut is a small ring. Such a point stands for the closed
+    end (its last full cross-section); a point deeper in the lumen is kept as the user's plane."""
+    from vcs.vessel import fit_vessel
+
+    m = trimesh.creation.capsule(height=120.0, radius=9.0, count=[48, 48]).subdivide_to_size(2.0)
+    m.apply_translation(SHIFT)
+    path = tmp_path / "capsule.stl"
+    m.export(path)
+    tips = [SHIFT + [0.5, -0.3, 66.5], SHIFT + [-0.4, 0.2, -66.5]]  # on the caps, 2.5 mm inside the tips
+    model, rep, _ = fit_vessel(path, units="mm", inlet=tips[0], outlet=tips[1])
+    assert rep["ends_method"] == "closed_ends" and rep["quality"] == "ok", rep["quality_reasons"]
+    theta = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    # the end sections are (nearly) full sections of the radius-9 cylinder: the closed end's last
+    # full section lies where the hemisphere begins (measured 8.49 mm); the cap cut at the given
+    # points is a ring of radius sqrt(9^2 - 6.5^2) = 6.2 mm
+    for tau in (0.0, 1.0):
+        assert np.all(np.abs(model.wall(np.full(64, tau), theta) - 9.0) < 0.75)
+    assert 120 < rep["centerline_length_mm"] < 130  # from where the hemispheres begin (+-60 mm), not +-66.5
+    deeper = SHIFT + [0.0, 0.0, 40.0]
+    _, rep2, _ = fit_vessel(path, units="mm", inlet=deeper, outlet=tips[1])
+    assert rep2["ends_method"] == "points+closed_ends" and rep2["quality"] == "ok"
+    assert abs(rep2["inlet"]["center_mm"][2] - deeper[2]) < 0.5
+
+
 def test_one_end_given_takes_the_other_of_a_pair():
     m = capped_cylinder()
     v, f = np.asarray(m.vertices), np.asarray(m.faces)
@@ -315,9 +341,9 @@ def test_closed_aortas_with_two_ends_fit_with_no_end_given(shared_data, tmp_path
 )
 def test_shared_meshes_candidate_kinds(shared_data, name, kinds):
     from vcs.io import read_surface
-    from vcs.vessel import largest_component
+    from vcs.vessel import vessel_component
 
-    s = largest_component(read_surface(shared_data / name))
+    s = vessel_component(read_surface(shared_data / name))
     assert [c.kind for c in list_ends(s.vertices, s.faces, s.cell_data).candidates] == kinds
 
 

@@ -145,19 +145,34 @@ def test_aortacfd_wall_has_no_bump_at_branches(fits):
 @pytest.mark.parametrize("name", list(CASES))
 def test_default_fit_quality(fits, name):
     """Issue 10 on every shared mesh with default settings (--L auto): the centerline inside the
-    lumen, tau the arc length within 5 % (aim 2 %), residual mean <= 0.2 mm, >= 95 % of the
-    vessel's wall points used (branch-free: 98 % of all between the end planes)."""
+    lumen, tau the arc length within 2 % (|c'| constant within 2 %: AortaCFD was 0.023 when the
+    candidate L were fitted to the noisy section centres), residual mean <= 0.2 mm, >= 95 % of
+    the vessel's wall points used (branch-free: 98 % of all between the end planes), quality ok."""
     model, r, wf = fits[name]
     assert r["L_source"] == "auto" and r["L"] >= 9
     assert r["centerline_inside_lumen"] and r["centerline_min_wall_distance_ratio"] > 0.5
-    assert r["arc_length_speed_deviation"] <= 0.05
+    assert r["arc_length_speed_deviation"] <= 0.02 and r["L_auto"]["criteria_met"]
     assert r["residual_mean_mm"] <= 0.2
     assert r["fraction_points_used_of_vessel"] >= 0.95
     if name in BRANCH_FREE:
         assert r["fraction_points_used"] >= 0.98, r["points_not_used"]
         assert r["points_not_used"]["branch"] == 0
-    assert r["quality"] in ("ok", "poor") and isinstance(r["quality_reasons"], list)
+    assert r["quality"] == "ok", r["quality_reasons"]
     json.dumps(r)
+
+
+def test_vmtk_points_on_the_caps_give_full_end_sections(fits):
+    """The vmtk segment's points lie on its rounded caps (~4 mm beyond the last full sections):
+    the end planes are those sections, not cuts across the caps (which gave rho_w 32 % of the
+    lumen radius at tau = 0 and quality poor)."""
+    model, r, wf = fits["vmtk_closed"]
+    assert r["ends_method"] == "closed_ends"
+    assert r["model_radius_min_ratio"] > 0.8 and r["quality"] == "ok"
+    # the end sections are as wide as the lumen next to them (rho_w at tau = 0 vs tau = 0.05)
+    theta = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    for t0, t1 in ((0.0, 0.05), (1.0, 0.95)):
+        r0, r1 = (np.median(model.wall(np.full(64, t), theta)) for t in (t0, t1))
+        assert r0 > 0.85 * r1, (t0, r0, r1)
 
 
 def test_real_branches_still_removed(fits):

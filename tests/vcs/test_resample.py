@@ -6,6 +6,7 @@ import shutil
 
 import numpy as np
 import pytest
+import pyvista as pv  # a dependency of vcs: a broken install must fail, not skip
 from scipy.interpolate import BSpline
 
 from vcs.centerline import uniform_knots
@@ -14,8 +15,6 @@ from vcs.grid import from_vcs_components, grid_axes, grid_to_vtk, local_frame, m
 from vcs.model import VesselCoordinateSystem
 from vcs.vessel import VesselModel
 from vcs.wall import WallModel
-
-pv = pytest.importorskip("pyvista")
 
 RADIUS_MM = 10.0
 LENGTH_MM = 120.0
@@ -188,11 +187,9 @@ def test_sample_mesh_far_outside_counts_nearest(tube_mesh):
 
 # --------------------------------------------------------------- real OpenFOAM (colleague's runner)
 def _foam_api():
-    try:
-        from vcs.cfd import detect_openfoam, render_case, run_case
-        from vcs.phantoms.analytic import write_closed_tube_stl
-    except ImportError as exc:  # pragma: no cover - depends on the checkout
-        pytest.skip(f"vcs.cfd not importable ({exc})")
+    from vcs.cfd import detect_openfoam, render_case, run_case  # the project's own: never a skip
+    from vcs.phantoms.analytic import write_closed_tube_stl
+
     if shutil.which("simpleFoam") is None or detect_openfoam()[0] != "esi":
         pytest.skip("Debian's ESI OpenFOAM (simpleFoam) not installed")
     return write_closed_tube_stl, render_case, run_case

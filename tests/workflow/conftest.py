@@ -53,6 +53,7 @@ class Workdir:
 
     def write_sheet(self, rows: list[dict], name: str = "patients.tsv") -> Path:
         cols = ["id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap"]
+        cols += sorted({c for r in rows for c in r} - set(cols))  # optional columns (cell_size_mm, ...)
         lines = ["\t".join(cols)] + ["\t".join(str(r.get(c, "")) for c in cols) for r in rows]
         sheet = self.path / name
         sheet.write_text("# test sheet\n" + "\n".join(lines) + "\n")

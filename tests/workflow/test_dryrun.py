@@ -48,11 +48,39 @@ def test_cfd_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort):
 
 def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     cohort.fake_finished_run()
-    current = cohort.config().get("cfd", {}).get("mesh", {}).get("cell_size", 2.0e-3)
-    cohort.update_config("cfd", "mesh", "cell_size", 1.5 * current)  # a real change, whatever the default
+    current = cohort.config().get("cfd", {}).get("mesh", {}).get("cell_size", "auto")
+    new = 3.0e-3 if current == "auto" else 1.5 * current  # a real change, whatever the default
+    cohort.update_config("cfd", "mesh", "cell_size", new)
     planned = cohort.planned_jobs()
     assert planned == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
     assert not {job for job in planned if job[0] in ("vcs_fit", "vcs_wall")}
+
+
+def test_auto_sizing_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort):
+    cohort.fake_finished_run()
+    cohort.update_config("cfd", "mesh", "cells_across_end", 16)
+    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
+
+
+def test_one_patients_own_cfd_values_rerun_only_that_patients_cfd(cohort):
+    """A flow rate (or cell size) in one row of the sheet is a param of that patient's case:
+    its CFD, sampling and the atlas rerun, nobody's fit, nobody else's CFD."""
+    cohort.fake_finished_run()
+    rows = [
+        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
+        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
+        {"id": "P3", "mesh": "meshes/p3.stl"},
+    ]
+    rows[1]["flow_rate_l_min"] = "2.5"
+    cohort.write_sheet(rows)
+    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"], ["P2"]) | COHORT
+    cohort.fake_finished_run()
+    rows[0]["cell_size_mm"] = "auto"  # the config's value, spelled out: no change
+    cohort.write_sheet(rows)
+    assert "Nothing to be done" in (lambda r: r.stdout + r.stderr)(cohort.snakemake("-n"))
+    rows[2]["cell_size_mm"] = "0.8"
+    cohort.write_sheet(rows)
+    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"], ["P3"]) | COHORT
 
 
 def test_knots_rerun_everything_downstream_of_the_fit(cohort):
@@ -252,6 +280,28 @@ def test_half_given_ends_fail_with_one_line(cohort):
     assert "both inlet and outlet" in _one_line_error(cohort)
 
 
+@pytest.mark.parametrize(
+    "cells, expected",
+    [
+        ({"cell_size_mm": "fine"}, "cell_size_mm 'fine' is not a number (or auto)"),
+        ({"cell_size_mm": "0.01"}, "cell_size_mm 0.01 must be auto or a number of mm in [0.05, 50]"),
+        ({"flow_rate_l_min": "-2"}, "flow_rate_l_min: -2.0 is less than or equal to the minimum of 0"),
+        ({"flow_rate_l_min": "5 L/min"}, "flow_rate_l_min '5 L/min' is not a number"),
+        ({"flow_rate_l_min": "80"}, "flow_rate_l_min: 80.0 is greater than the maximum of 50"),
+        ({"inlet_velocity_m_s": "1.2"}, "the inflow needs both inlet_velocity_m_s and valve_area_cm2"),
+        ({"valve_area_cm2": "1"}, "the inflow needs both inlet_velocity_m_s and valve_area_cm2"),
+        (
+            {"flow_rate_l_min": "4", "inlet_velocity_m_s": "1.2", "valve_area_cm2": "1"},
+            "give the inflow either as flow_rate_l_min or as inlet_velocity_m_s + valve_area_cm2, not both",
+        ),
+    ],
+)
+def test_bad_patient_cfd_columns_fail_with_one_line(cohort, cells, expected):
+    cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl"}, {"id": "P2", "mesh": "meshes/p3.stl", **cells}])
+    msg = _one_line_error(cohort)
+    assert "line 4 (id P2)" in msg and expected in msg, msg
+
+
 @pytest.mark.parametrize("bad", ["2", "end:", "1,2", "cap 3"])
 def test_malformed_sheet_end_fails_with_one_line(cohort, bad):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": bad, "outlet": "end:1"}])
@@ -263,6 +313,50 @@ def test_bad_config_value_fails_with_one_line(cohort):
     cohort.update_config("cfd", "ranks", 0)
     msg = _one_line_error(cohort)
     assert "cfd > ranks" in msg and "minimum of 1" in msg
+
+
+@pytest.mark.parametrize(
+    ("keys", "value"),
+    [
+        (("cfd", "solver", "div_scheme"), 'linearUpwind grad(U); #codeStream { code #{ system("id"); #}; }'),
+        (("cfd", "solver", "startup_scheme"), "upwind;\nfunctions {}"),
+        (("cfd", "decomposition", "method"), "scotch"),
+    ],
+)
+def test_config_text_for_openfoam_dictionaries_is_refused_unless_listed(cohort, keys, value):
+    """A config string is written into system/fvSchemes etc.: anything but a listed word stops the
+    run with one line before any dictionary is written (no #codeStream injection)."""
+    cohort.update_config(*keys, value)
+    msg = _one_line_error(cohort)
+    assert " > ".join(keys) in msg and "is not one of" in msg, msg
+
+
+def test_every_config_string_is_an_enum_or_a_pattern():
+    """Every string of the config schema is constrained (enum or pattern), except the sheet's path,
+    which never reaches an OpenFOAM dictionary."""
+    import yaml
+
+    schema = yaml.safe_load((Path(__file__).resolve().parents[2] / "workflow/schemas/config.schema.yaml").read_text())
+    free = []
+
+    def walk(node, path):
+        if not isinstance(node, dict):
+            return
+        types = node.get("type") if isinstance(node.get("type"), list) else [node.get("type")]
+        if "string" in types and "enum" not in node and "pattern" not in node:
+            free.append(path)
+        for key, value in node.items():
+            if key == "properties":
+                for name, sub in value.items():
+                    walk(sub, f"{path}/{name}")
+            elif key in ("oneOf", "anyOf", "allOf"):
+                for sub in value:
+                    walk(sub, path)
+            elif key in ("items", "additionalProperties"):
+                walk(value, f"{path}/{key}")
+
+    walk(schema, "")
+    assert free == ["/patients"], free
 
 
 def test_unknown_config_key_fails_with_one_line(cohort):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from model_phantoms import narrowed_model  # tests/ (on sys.path by conftest): vessels with exact sections
 
 from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case, sample_case
 from vcs.cfd.case import jet_region, render_files
@@ -24,6 +25,7 @@ from vcs.cfd.run import STAGE_FILES, transient_plan
 from vcs.cfd.verification import local_error_stats, poiseuille_wall_shear_stress
 from vcs.errors import VCSInputError
 from vcs.phantoms.analytic import write_closed_tube_stl
+from vcs.surface import wall_mesh, write_multisolid_stl
 
 R = 0.01  # tube radius [m]
 L = 0.12  # tube length [m]
@@ -61,6 +63,34 @@ def test_defaults_documented_keys():
     assert DEFAULTS["inlet"]["type"] == "jet"
     assert DEFAULTS["inlet"]["velocity"] * DEFAULTS["inlet"]["valve_area"] == pytest.approx(1.2e-4)
     assert DEFAULTS["solver"]["tolerance"] == pytest.approx(1e-5)
+
+
+def test_config_schema_covers_every_cfd_default():
+    """Each key of vcs.cfd.DEFAULTS can be set in config.yaml (the schema forbids unknown keys) and
+    config/config.yaml validates, auto cell size and inflow scaling included."""
+    import jsonschema
+    import yaml
+
+    repo = Path(__file__).resolve().parents[2]
+    schema = yaml.safe_load((repo / "workflow/schemas/config.schema.yaml").read_text())
+
+    def missing(defaults: dict, node: dict, where: str) -> list[str]:
+        out = []
+        for k, v in defaults.items():
+            sub = node.get("properties", {}).get(k)
+            if sub is None:
+                out.append(f"{where}.{k}")
+            elif isinstance(v, dict):
+                out += missing(v, sub, f"{where}.{k}")
+        return out
+
+    assert missing(DEFAULTS, schema["properties"]["cfd"], "cfd") == []
+    config = yaml.safe_load((repo / "config/config.yaml").read_text())
+    jsonschema.validate(config, schema)
+    assert config["cfd"]["mesh"]["cell_size"] == "auto" and config["cfd"]["inlet"]["scaling"] == "scaled_by_inlet_area"
+    bad = deep_merge(config, {"cfd": {"mesh": {"cell_size": "fine"}}})
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(bad, schema)
 
 
 def test_render_org10_is_v10_native_and_parses(tmp_path):
@@ -294,6 +324,86 @@ def test_jet_inlet_flux(tmp_path):
     assert st["mesh"]["layers"] == {"requested": 0} and st["mesh"]["jet_refinement"] is None
 
 
+# ------------------------------------------------- mesh sized to the vessel, lost patches
+
+QUICK_SOLVE = {"max_iterations": 2, "startup_iterations": 0, "fallback": "none"}
+
+
+def _model_stl(tmp: Path, model, n_theta: int) -> Path:
+    stl = tmp / "wall.stl"
+    write_multisolid_stl(wall_mesh(model, n_theta=n_theta), stl, 1e-3)  # Eq. 8 wall, as the workflow writes it
+    return stl
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_too_coarse_cell_size_loses_the_outlet_and_says_so(tmp_path):
+    """A 2 mm cell against a 1 mm outlet radius: snappyHexMesh drops the outlet and checkMesh still
+    says 'Mesh OK'. The patient stops after meshing with the reason in words, never reaches the
+    solver, and the atlas excludes it with that reason."""
+    from vcs.atlas import status_exclusion, status_stage
+    from vcs.cfd.foamfiles import read_boundary
+
+    model = narrowed_model(6.0, 4.0, 1.0, length=30.0)  # inlet r 6 mm, outlet r 1 mm
+    stl = _model_stl(tmp_path, model, 32)
+    cfd = {
+        "mesh": {"cell_size": 2e-3, "layers": 0, "min_patch_faces": 10},
+        "inlet": {"type": "parabolic", "flow_rate": 1e-6},
+        "solver": QUICK_SOLVE,
+    }
+    render_case(tmp_path / "c", stl, cfd, flavour="esi", model=model)
+    st = run_case(tmp_path / "c")
+    boundary = read_boundary(tmp_path / "c" / "constant" / "polyMesh")  # the real mesh
+    assert boundary.get("outlet", {}).get("nFaces", 0) == 0 and boundary["inlet"]["nFaces"] >= 10
+    assert "Mesh OK." in (tmp_path / "c" / "logs" / "log.checkMesh").read_text()  # checkMesh does not see it
+    r_out = 1.0 * np.sqrt(32 / (2 * np.pi) * np.sin(2 * np.pi / 32))  # equivalent radius of the 32-gon cap: 0.994 mm
+    assert st["reason"] == (
+        f"outlet lost in meshing: 0 faces (minimum 10); cell size 2 mm vs outlet radius {r_out:.3g} mm; "
+        "lower cfd.mesh.cell_size"
+    )
+    assert st["converged"] is False and st["mesh_ok"] is False and st["stage"] == "mesh"
+    assert st["mesh"]["patches"]["outlet"]["faces"] == 0 and st["mesh"]["background_faces"] == 0
+    assert st["failed_log"].endswith("logs/log.snappyHexMesh")
+    assert not any(k.startswith("simpleFoam") for k in st["timings_s"])  # the solver never ran
+    assert st["mesh"]["sizing"]["cell_size"]["source"] == "config"
+    assert status_exclusion(st) == st["reason"] and status_stage(st) == "mesh"  # atlas.json: stage and reason
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_auto_cell_size_with_a_coarse_background_keeps_the_lumen_cells(tmp_path):
+    """cell_size auto on a vessel with known sections; the background box is capped so low that
+    it is 4x coarser than the lumen cell, yet every cell of the lumen is at the lumen cell size
+    (the whole lumen is refined) and every STL solid became a patch."""
+    import pyvista as pv
+
+    model = narrowed_model(12.0, 10.0, 11.0, length=30.0)  # ends d 24 and 22 mm, narrowest 20 mm
+    stl = _model_stl(tmp_path, model, 48)
+    cfd = {
+        "mesh": {"cell_size": "auto", "cells_across_end": 16, "layers": 0, "max_background_cells": 2000},
+        "inlet": {"type": "parabolic", "flow_rate": 2e-5},
+        "solver": QUICK_SOLVE,
+    }
+    state = render_case(tmp_path / "c", stl, cfd, flavour="esi", model=model)
+    h = state["mesh_sizing"]["cell_size_m"]
+    assert h == pytest.approx(1.37e-3)  # 22 mm / 16 = 1.375 mm, rounded down; narrowest 20 / 8 = 2.5 mm
+    bg = state["mesh_sizing"]["background"]
+    assert bg["level_offset"] == 2 and bg["background_cells"] <= 2000
+    st = run_case(tmp_path / "c")
+    assert st["mesh_ok"] is True and st["reason"].startswith("SIMPLE did not reach")  # only 2 iterations
+    faces = {k: v["faces"] for k, v in st["mesh"]["patches"].items()}
+    assert min(faces.values()) >= 20 and st["mesh"]["background_faces"] == 0
+    (tmp_path / "c" / "c.foam").touch()
+    rd = pv.POpenFOAMReader(str(tmp_path / "c" / "c.foam"))
+    rd.set_active_time_value(rd.time_values[0])
+    vol = np.asarray(rd.read()["internalMesh"].compute_cell_sizes(length=False, area=False)["Volume"])
+    assert (vol > 1.5 * h**3).mean() < 0.02  # not 5.48 mm background cells in the core
+    # cell count ~ lumen volume / h^3; radius 12 - 7 t + 6 t^2 mm (through 12, 10, 11), so
+    # V = pi L int_0^1 r^2 dt = pi 30 (a^2 + ab + (b^2 + 2ac)/3 + bc/2 + c^2/5) = pi 30 x 110.533 mm3
+    v_lumen = np.pi * 30.0 * (144 - 84 + (49 + 144) / 3 - 21 + 36 / 5) * 1e-9
+    assert st["cells"] == pytest.approx(v_lumen / h**3, rel=0.1)  # ~4,050 cells
+
+
 # ------------------------------------------------- the paper's jet: mesh, transient fallback
 
 # a coarse tube with a small, slow jet: Re_jet = 0.3 m/s x 5 mm / 1e-5 m2/s = 150 (steady), ~4k
@@ -414,6 +524,29 @@ def test_render_jet_mesh_and_transient_stages(tmp_path, flavour):
     )
     txt = (case / "system/controlDict").read_text()
     assert "fieldAverage" not in txt and "timeStep)" not in txt.replace("writeControl    timeStep", "")
+
+
+def test_paper_config_is_the_papers_jet(tmp_path):
+    """config/paper.yaml over config/config.yaml (as ``--configfile`` merges it) is valid and is the
+    paper's set-up (Section 2.4.1): 1.2 m/s over 1 cm2 (Q 1.2e-4 m3/s), nu 3.37e-6 m2/s, steady
+    SIMPLE to 1e-5 first, the transient time average over >= 5 flow-through times otherwise."""
+    import yaml
+    from snakemake.utils import validate
+
+    repo = Path(__file__).resolve().parents[2]
+    cfg = deep_merge(
+        yaml.safe_load((repo / "config" / "config.yaml").read_text()),
+        yaml.safe_load((repo / "config" / "paper.yaml").read_text()),
+    )
+    validate(cfg, str(repo / "workflow" / "schemas" / "config.schema.yaml"))
+    cfd = cfg["cfd"]
+    assert cfd["inlet"] == {**cfd["inlet"], "type": "jet", "velocity": 1.2, "valve_area": 1.0e-4, "flow_rate": None}
+    assert cfd["physics"]["nu"] == pytest.approx(3.37e-6) and cfd["solver"]["tolerance"] == pytest.approx(1e-5)
+    assert cfd["solver"]["fallback"] == "transient" and cfd["solver"]["transient"]["flow_throughs"] >= 5
+    assert cfd["mesh"]["layers"] > 0 and cfd["mesh"]["jet_refinement"]["enabled"]
+    cfd.pop("flavour")
+    state = render_case(tmp_path / "paper", _tube(tmp_path), cfd, flavour="esi")
+    assert state["flow_rate"] == pytest.approx(1.2e-4) and state["jet_region"]["cells_across"] >= 10
 
 
 def test_bad_cfd_words_and_removed_fallback(tmp_path):

@@ -62,8 +62,9 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     legacy status of the removed SIMPLE-iterate averaging with ``converged_relaxed`` true is
     included (new runs never write it). The reason quotes the
     status's own ``reason``/``error``/``message``; a failure recorded before the solver (a status
-    whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those) is its reason
-    as is.
+    whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those), or a mesh
+    that stopped the patient before the solver (``stage`` ``mesh``, ``mesh_ok`` false: an end lost
+    in meshing, a leak), is its reason as is.
 
     Parameters
     ----------
@@ -84,6 +85,8 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     failed = status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout")
     if failed and status.get("stage") in ("fit", "wall", "case") and detail:
         return detail
+    if status.get("stage") == "mesh" and status.get("mesh_ok") is False and detail:
+        return detail  # run_case's patch check: already what happened, in words
     detail = f": {detail}" if detail else ""
     if failed:
         return f"solver failed ({state or 'failed'}){detail}"

@@ -11,7 +11,9 @@ Public API::
     write_fields(fields, "fields.npz")
 
 Modules: :mod:`vcs.cfd.openfoam` (defaults, flavour table, detection, templates),
-:mod:`vcs.cfd.case` (rendering, inlet profile), :mod:`vcs.cfd.run` (meshing, solving, status),
+:mod:`vcs.cfd.sizing` (cell size from the vessel, bounded background box, per-patient inflow),
+:mod:`vcs.cfd.case` (rendering, inlet profile), :mod:`vcs.cfd.run` (meshing, patch check,
+solving, status),
 :mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
 """

@@ -14,11 +14,26 @@ from numpy.typing import NDArray
 
 from vcs.cfd.foamfiles import patch_geometry
 from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, check_cfd, deep_merge, detect_openfoam, template_dir
+from vcs.cfd.sizing import (
+    background_plan,
+    cell_size_value,
+    choose_cell_size,
+    choose_inflow,
+    closed_volume,
+    stl_sizes,
+    surface_area,
+    vessel_sizes,
+)
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 from vcs.mesh import points_inside, read_stl_solids, triangle_cross
 
 if TYPE_CHECKING:
     import jinja2
+
+    from vcs.vessel import VesselModel
+
+#: per-patient values render_case accepts (SI units), e.g. from the patients sheet
+PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area")
 
 STL_NAME = "vessel.stl"
 CASE_JSON = "vcsflow_case.json"
@@ -66,12 +81,17 @@ def patch_role(name: str) -> str:
     return "other"
 
 
-def _inside_point(solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floating], h: float) -> list[float]:
-    """A point inside the closed STL (for snappyHexMesh), off the background mesh's faces.
+def _inside_point(
+    solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floating], h: float, h_finest: float | None = None
+) -> list[float]:
+    """A point inside the closed STL (for snappyHexMesh), off the faces of every mesh level.
 
-    Tried in order: points on the inlet's normal at 4, 8, 16, 2, 32 cells from its centroid, then
-    the mean of all corners; each snapped to a fixed fraction inside its background cell.
+    Tried in order: points on the inlet's normal at 4, 8, 16, 2, 32 lumen cells ``h`` from its
+    centroid, then the mean of all corners; each snapped to a fixed fraction inside its cell of
+    the finest level ``h_finest`` (default ``h``), whose faces include those of every coarser
+    level.
     """
+    h_grid = h if h_finest is None else h_finest
     alltris = np.concatenate(list(solids.values()))
     inlets = [k for k in solids if patch_role(k) == "inlet"]
     seeds = []
@@ -82,7 +102,7 @@ def _inside_point(solids: dict[str, NDArray[np.floating]], bmin: NDArray[np.floa
     seeds.append(alltris.reshape(-1, 3).mean(0))
     frac = np.array([0.371, 0.413, 0.437])
     for p in seeds:
-        q = bmin + (np.floor((p - bmin) / h) + frac) * h  # keep it off background-mesh faces
+        q = bmin + (np.floor((p - bmin) / h_grid) + frac) * h_grid  # keep it off mesh faces
         if points_inside(q[None], alltris)[0]:
             return [float(x) for x in q]
     raise VCSInputError("could not find a point inside the vessel surface; set mesh.inside_point")
@@ -98,20 +118,31 @@ def _inlet_disc(solids: dict[str, NDArray[np.floating]]) -> tuple[NDArray[np.flo
     return c, n
 
 
-def jet_region(solids: dict[str, NDArray[np.floating]], cfd: dict[str, Any]) -> dict[str, Any] | None:
+def jet_region(
+    solids: dict[str, NDArray[np.floating]],
+    cfd: dict[str, Any],
+    *,
+    background: float | None = None,
+    min_level: int = 0,
+) -> dict[str, Any] | None:
     """The refinement cylinder along the jet (snappyHexMesh ``refinementRegions``, mode inside).
 
     The cylinder starts half a background cell behind the jet centre (``inlet.centre`` or the
     inlet's area centroid) and runs along the inlet's inward normal for ``length`` jet diameters,
-    with a radius of ``radius`` jet radii; its level is the smallest giving at least
-    ``cells_across`` cells across the jet diameter d = 2 sqrt(valve_area / pi).
+    with a radius of ``radius`` jet radii; its level is the smallest (at least ``min_level``)
+    giving at least ``cells_across`` cells across the jet diameter d = 2 sqrt(valve_area / pi).
 
     Parameters
     ----------
     solids : dict of str -> (T, 3, 3) float
         The STL's triangles by solid (m).
     cfd : dict
-        Merged CFD parameters (``mesh.cell_size`` m, ``mesh.jet_refinement``, ``inlet``).
+        Merged CFD parameters (``mesh.jet_refinement``, ``inlet``; ``mesh.cell_size`` m when
+        ``background`` is None).
+    background : float or None, m
+        Background (blockMesh) cell size; None: ``mesh.cell_size``.
+    min_level : int
+        Lowest level (the lumen's refinement level: the jet is never coarser than the lumen).
 
     Returns
     -------
@@ -123,9 +154,9 @@ def jet_region(solids: dict[str, NDArray[np.floating]], cfd: dict[str, Any]) -> 
     jr = cfd["mesh"]["jet_refinement"]
     if cfd["inlet"]["type"] != "jet" or not jr["enabled"]:
         return None
-    h = float(cfd["mesh"]["cell_size"])
+    h = float(cfd["mesh"]["cell_size"] if background is None else background)
     d = 2.0 * np.sqrt(float(cfd["inlet"]["valve_area"]) / np.pi)
-    level = max(int(np.ceil(np.log2(max(jr["cells_across"] * h / d, 1.0)) - 1e-9)), 0)
+    level = max(int(np.ceil(np.log2(max(jr["cells_across"] * h / d, 1.0)) - 1e-9)), int(min_level))
     c, n = _inlet_disc(solids)
     if cfd["inlet"].get("centre"):
         c = np.asarray(cfd["inlet"]["centre"], float)
@@ -146,6 +177,7 @@ def jet_region(solids: dict[str, NDArray[np.floating]], cfd: dict[str, Any]) -> 
 def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
     """Template variables of a case state; ``extra`` overrides them."""
     cfd = state["cfd"]
+    sizing = state.get("mesh_sizing")  # absent from states written before the sizing existed
     ctx = {
         "flavour": state["flavour"],
         "flav": FLAVOURS[state["flavour"]],
@@ -156,6 +188,9 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "io": cfd["io"],
         "ranks": max(int(cfd["ranks"]), 1),
         "decomposition": {"method": cfd["decomposition"]["method"], "n": state["decomposition_n"]},
+        "background_cell_size": sizing["background"]["background_cell_size_m"] if sizing else cfd["mesh"]["cell_size"],
+        "surface_level": sizing["levels"]["surface"] if sizing else cfd["mesh"]["surface_level"],
+        "lumen_level": sizing["levels"]["lumen"] if sizing else 0,
         "bmin": state["bmin"],
         "bmax": state["bmax"],
         "ncells": state["ncells"],
@@ -200,20 +235,46 @@ def render_files(case_dir: Path, state: dict[str, Any], files: list[str], **extr
         out.write_text(env.get_template(rel).render(**ctx))
 
 
-def _flow_rate(inlet: dict[str, Any]) -> float:
-    """Inlet flow rate Q in m^3/s: ``flow_rate`` if set, else velocity (m/s) x valve_area (m^2)."""
-    if inlet.get("flow_rate"):
-        return float(inlet["flow_rate"])
-    return float(inlet["velocity"]) * float(inlet["valve_area"])
+def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
+    """The per-patient values of :func:`render_case`, checked (one-line VCSInputError)."""
+    out: dict[str, Any] = {}
+    for k, v in (patient or {}).items():
+        if k not in PATIENT_KEYS:
+            raise VCSInputError(f"unknown per-patient CFD value {k!r}; known: {', '.join(PATIENT_KEYS)}")
+        if v is None:
+            continue
+        if k == "cell_size":
+            out[k] = cell_size_value(v, "the patient's cell size")
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+            raise VCSInputError(f"the patient's {k} must be a positive number (SI units), not {v!r}")
+        out[k] = float(v)
+    if ("velocity" in out) != ("valve_area" in out):
+        raise VCSInputError("the patient's inlet velocity needs its valve area (and the other way round)")
+    if "flow_rate" in out and "velocity" in out:
+        raise VCSInputError("give the patient's inflow either as a flow rate or as velocity + valve area, not both")
+    return out
 
 
 def render_case(
-    case_dir: Path | str, stl_path: Path | str, cfd: dict[str, Any] | None = None, *, flavour: str | None = None
+    case_dir: Path | str,
+    stl_path: Path | str,
+    cfd: dict[str, Any] | None = None,
+    *,
+    flavour: str | None = None,
+    model: VesselModel | Path | str | None = None,
+    patient: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write a complete OpenFOAM case for a multi-solid ASCII STL (paper Section 2.4.1).
 
     ``cfd`` is merged over ``DEFAULTS``. The flavour is ``flavour`` or ``cfd['flavour']`` or the
-    detected installation (``"esi"`` when none is found).
+    detected installation (``"esi"`` when none is found). The lumen cell size is the patient's,
+    ``mesh.cell_size``, or (``auto``) computed from the vessel's end diameters and narrowest
+    section (:func:`vcs.cfd.sizing.choose_cell_size`; from the model when given, else from the
+    STL's caps); the background box is bounded (:func:`vcs.cfd.sizing.background_plan`); the
+    inflow is the patient's, or the config's fixed or scaled by the inlet area
+    (:func:`vcs.cfd.sizing.choose_inflow`). What was chosen, and why, is in ``mesh_sizing`` and
+    ``inflow`` of the returned state (and of ``status.json`` after :func:`vcs.cfd.run_case`).
 
     Parameters
     ----------
@@ -227,19 +288,29 @@ def render_case(
         m^2/s, kg/m^3).
     flavour : str or None
         ``"esi"`` or ``"org10"``; overrides ``cfd['flavour']``.
+    model : VesselModel, path of a model.json, or None
+        The vessel model the STL was made from (its end and narrowest sections size the mesh
+        when ``mesh.cell_size`` is ``auto``); None: the STL's caps (ends only).
+    patient : dict or None
+        The patient's own values, taking precedence over ``cfd`` and applied as given (never
+        scaled): ``cell_size`` (m or ``"auto"``), ``flow_rate`` (m^3/s), or ``velocity`` (m/s)
+        with ``valve_area`` (m^2); None values are ignored.
 
     Returns
     -------
     dict
-        The case description (also saved as ``vcsflow_case.json``): flavour, merged ``cfd``,
-        background box ``bmin``/``bmax`` (m) and ``ncells``, ``inside_point`` (m), solids and
-        patches with their roles, ``flow_rate`` (m^3/s), ``stl_bounds`` (m), ``files``.
+        The case description (also saved as ``vcsflow_case.json``): flavour, merged ``cfd``
+        (``inlet.flow_rate`` and ``inlet.valve_area`` as applied), background box
+        ``bmin``/``bmax`` (m) and ``ncells``, ``inside_point`` (m), solids and patches with
+        their roles and levels, ``flow_rate`` (m^3/s), ``stl_bounds`` (m), ``mesh_sizing``
+        (vessel sizes, cell size and why, background plan, levels, smallest cell), ``inflow``
+        (:func:`vcs.cfd.sizing.choose_inflow` + inlet Reynolds number), ``files``.
 
     Raises
     ------
     VCSInputError
         For an unknown flavour or inlet type, an STL without exactly one inlet or without an
-        outlet, or when no point inside the surface is found.
+        outlet, a bad per-patient value, or when no point inside the surface is found.
     """
     case_dir = Path(case_dir)
     cfd = deep_merge(DEFAULTS, cfd)
@@ -251,6 +322,7 @@ def render_case(
         )
     cfd["flavour"] = flavour
     check_cfd(cfd)
+    own = _patient_values(patient)
     fl = FLAVOURS[flavour]
 
     solids = read_stl_solids(stl_path)
@@ -262,43 +334,88 @@ def render_case(
     pts = np.concatenate([t.reshape(-1, 3) for t in solids.values()])
     lo, hi = pts.min(0), pts.max(0)
     m = cfd["mesh"]
-    h = float(m["cell_size"])
-    bmin = lo - m["pad_cells"] * h
-    ncells = np.ceil((hi - lo) / h + 2 * m["pad_cells"]).astype(int)
-    bmax = bmin + ncells * h
-    inside = m.get("inside_point") or _inside_point(solids, bmin, h)
+
+    # cell size from the vessel, bounded background box, levels relative to it
+    if model is not None:
+        if not hasattr(model, "fitted_wall"):
+            from vcs.vessel import VesselModel
+
+            model = VesselModel.load(model)
+        sizes = vessel_sizes(model)  # type: ignore[arg-type]
+    else:
+        sizes = stl_sizes(solids, roles)
+    volume = closed_volume(solids)
+    sizing = choose_cell_size(m, sizes, volume, override=own.get("cell_size"))
+    h = sizing["cell_size_m"]
+    bg = background_plan(h, lo, hi, m, sizes["narrowest_diameter_m"])
+    k = bg["level_offset"]
+    hb = bg["background_cell_size_m"]
+
+    def up(lv: list[int]) -> list[int]:
+        return [int(lv[0]) + k, int(lv[1]) + k]
+
+    level = {
+        "wall": up(m["wall_level"]),
+        "inlet": up(m["inlet_level"]),
+        "outlet": up(m["outlet_level"]),
+        "other": up(m["surface_level"]),
+    }
+
+    # inflow: the patient's, or the config's (fixed or scaled by the inlet area)
+    inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
+    inflow = choose_inflow(cfd["inlet"], inlet_area, patient={k2: own[k2] for k2 in own if k2 != "cell_size"})
+    d_in = 2.0 * np.sqrt(inlet_area / np.pi)
+    inflow["inlet_reynolds"] = inflow["mean_inlet_velocity_m_s"] * d_in / float(cfd["physics"]["nu"])
+    cfd["inlet"]["flow_rate"] = inflow["flow_rate_m3_s"]
+    cfd["inlet"]["valve_area"] = inflow["valve_area_m2"]
+    if inflow["jet_velocity_m_s"] is not None:
+        cfd["inlet"]["velocity"] = inflow["jet_velocity_m_s"]
+
+    jet = jet_region(solids, cfd, background=hb, min_level=k)
+    finest = max(
+        [k, *level["wall"], *level["inlet"], *level["outlet"], *level["other"]] + ([jet["level"]] if jet else [])
+    )
+    bmin = np.asarray(bg["bmin"])
+    inside = m.get("inside_point") or _inside_point(solids, bmin, h, hb / 2**finest)
     ranks = max(int(cfd["ranks"]), 1)
     n = [1, 1, 1]
     n[int(np.argmax(hi - lo))] = ranks
 
-    level = {
-        "wall": m["wall_level"],
-        "inlet": m["inlet_level"],
-        "outlet": m["outlet_level"],
-        "other": m["surface_level"],
-    }
     state = {
         "flavour": flavour,
         "cfd": cfd,
         "stl_source": str(Path(stl_path).resolve()),
-        "bmin": [float(x) for x in bmin],
-        "bmax": [float(x) for x in bmax],
-        "ncells": [int(x) for x in ncells],
+        "bmin": bg["bmin"],
+        "bmax": bg["bmax"],
+        "ncells": bg["ncells"],
         "inside_point": [float(x) for x in inside],
         "decomposition_n": n,
         "solids": [
             {
-                "name": k,
-                "role": roles[k],
-                "patch_type": "wall" if roles[k] == "wall" else "patch",
-                "level": level[roles[k]],
+                "name": name,
+                "role": roles[name],
+                "patch_type": "wall" if roles[name] == "wall" else "patch",
+                "level": level[roles[name]],
+                "area_m2": surface_area(t),
+                "cell_size_m": hb / 2 ** level[roles[name]][1],
             }
-            for k in solids
+            for name, t in solids.items()
         ],
-        "patches": [{"name": k, "role": roles[k]} for k in solids] + [{"name": "background", "role": "other"}],
-        "flow_rate": _flow_rate(cfd["inlet"]),
+        "patches": [{"name": k2, "role": roles[k2]} for k2 in solids] + [{"name": "background", "role": "other"}],
+        "flow_rate": inflow["flow_rate_m3_s"],
         "stl_bounds": [[float(x) for x in lo], [float(x) for x in hi]],
-        "jet_region": jet_region(solids, cfd),
+        "jet_region": jet,
+        "mesh_sizing": {
+            "vessel": sizes,
+            "lumen_volume_m3": volume,
+            "cell_size_m": h,
+            "cell_size": sizing,
+            "background": bg,
+            "levels": {"surface": level["other"], "lumen": k, **{r: level[r] for r in ("wall", "inlet", "outlet")}},
+            "smallest_cell_m": hb / 2**finest,
+            "min_patch_faces": int(m["min_patch_faces"]),
+        },
+        "inflow": inflow,
     }
     case_dir.mkdir(parents=True, exist_ok=True)
     geo = case_dir / fl["geometry_dir"]

@@ -33,8 +33,13 @@ DEFAULTS: dict[str, Any] = {
     "flavour": None,  # None = detect the installed OpenFOAM; "esi" (v1912/openfoam.com) or "org10"
     "ranks": 1,  # MPI ranks for simpleFoam (1 = serial); decomposition below
     "mesh": {
-        "cell_size": 1.0e-3,  # background (blockMesh) hex edge [m]
-        "pad_cells": 3,  # background box = STL bounds + pad_cells cells on every side
+        "cell_size": "auto",  # lumen cell size [m], or "auto": from the vessel (vcs.cfd.sizing)
+        "cells_across_end": 12,  # auto: at least this many cells across the smaller end diameter
+        "cells_across_narrowest": 8,  # auto: ... and across the narrowest section
+        "max_cells": 1_000_000,  # auto: estimated lumen cells (V / h^3) above this coarsen h (recorded)
+        "max_background_cells": 100_000,  # blockMesh box cells; above: coarser box, levels raised
+        "min_patch_faces": 20,  # each STL solid must become a patch of at least this many faces
+        "pad_cells": 3,  # background box = STL bounds + pad_cells background cells on every side
         "surface_level": [0, 0],  # snappy (min max) refinement level on the whole vessel surface
         "wall_level": [0, 0],  # ... on the wall solid
         "inlet_level": [0, 0],  # ... on the inlet solid (raise to resolve the jet's shear layer)
@@ -67,6 +72,9 @@ DEFAULTS: dict[str, Any] = {
         "velocity": 1.2,  # jet velocity [m/s] (paper: 1.2 m/s)
         "valve_area": 1.0e-4,  # effective valve area [m2] (paper: 1 cm2) -> Q = velocity * area
         "flow_rate": None,  # [m3/s]; overrides velocity * valve_area when set
+        "scaling": "fixed",  # fixed | scaled_by_inlet_area: Q x min(A_inlet / reference_inlet_area, max_scale)
+        "reference_inlet_area": 4.909e-4,  # [m2] inlet area at which Q applies unscaled (25 mm diameter)
+        "max_scale": 1.0,  # largest scale factor (1: a dilated root gets no more than Q)
         "centre": None,  # jet centre [x, y, z]; None = area centroid of the inlet patch
     },
     "solver": {
@@ -105,6 +113,7 @@ DEFAULTS: dict[str, Any] = {
 
 # the words a config may put into an OpenFOAM dictionary (everything else there is a number)
 INLET_TYPES = ("jet", "uniform", "parabolic")
+INFLOW_SCALINGS = ("fixed", "scaled_by_inlet_area")
 DIV_SCHEMES = ("upwind", "linearUpwind", "LUST", "limitedLinearV")  # div(phi,U), see fvSchemes
 FALLBACKS = ("none", "transient")
 DECOMPOSITION_METHODS = ("hierarchical", "simple")
@@ -199,9 +208,10 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     Raises
     ------
     VCSInputError
-        For a word outside its list (inlet type, div schemes, fallback, decomposition method,
-        write format), the removed ``fallback: average``, or a transient or jet-refinement
-        number out of range.
+        For a word outside its list (inlet type and scaling, div schemes, fallback, decomposition
+        method, write format), the removed ``fallback: average``, a cell size that is neither
+        ``auto`` nor a length, or a sizing, inflow, transient or jet-refinement number out of
+        range.
     """
     if cfd["solver"].get("fallback") == "average":
         raise VCSInputError(
@@ -209,6 +219,17 @@ def check_cfd(cfd: dict[str, Any]) -> None:
             "use 'transient' (pimpleFoam, time-averaged fields) or 'none'"
         )
     _word(cfd, "inlet.type", INLET_TYPES)
+    _word(cfd, "inlet.scaling", INFLOW_SCALINGS)
+    _number(cfd, "inlet.reference_inlet_area", 0.0, 1.0, lo_open=True)
+    _number(cfd, "inlet.max_scale", 0.0, 100.0, lo_open=True)
+    size = cfd["mesh"].get("cell_size")
+    if size != "auto" and not (isinstance(size, (int, float)) and not isinstance(size, bool) and 0 < size <= 10):
+        raise VCSInputError(f"cfd.mesh.cell_size must be 'auto' or a number of metres in (0, 10], not {size!r}")
+    _number(cfd, "mesh.cells_across_end", 1, 1000)
+    _number(cfd, "mesh.cells_across_narrowest", 1, 1000)
+    _number(cfd, "mesh.max_cells", 1, 1e10)
+    _number(cfd, "mesh.max_background_cells", 1, 1e10)
+    _number(cfd, "mesh.min_patch_faces", 1, 1e9)
     _word(cfd, "solver.fallback", FALLBACKS)
     _word(cfd, "solver.startup_scheme", DIV_SCHEMES)
     _word(cfd, "solver.div_scheme", DIV_SCHEMES)

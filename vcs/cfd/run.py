@@ -29,6 +29,7 @@ from vcs.cfd.foamfiles import (
     parse_layer_summary,
     parse_solver_log,
     patch_geometry,
+    read_boundary,
     read_internal_field,
     read_patch_field,
     window_mean,
@@ -203,11 +204,83 @@ def _mesh_report(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
     return {"layers": layers, "jet_refinement": state.get("jet_region")}
 
 
+def patch_check(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
+    """Did every STL solid become a patch of at least ``mesh.min_patch_faces`` faces, and is the
+    ``background`` patch (the blockMesh box) empty? Read from the meshed case's
+    ``constant/polyMesh/boundary``.
+
+    snappyHexMesh drops an end whose cap is small against the cells around it and still writes a
+    mesh that checkMesh calls OK; the solver then fails far from the cause ("Unable to set
+    reference cell", a floating point exception). A non-empty ``background`` patch means the
+    mesh leaked out of the vessel into the box.
+
+    Parameters
+    ----------
+    case_dir : Path
+        A case after snappyHexMesh (ASCII polyMesh).
+    state : dict
+        Case description (``solids`` with role, area and cell size, ``mesh_sizing``).
+
+    Returns
+    -------
+    dict
+        ``ok`` (bool), ``patches``: {solid: {``role``, ``faces`` (0 when missing),
+        ``min_faces``, ``cell_size_m`` (at that patch), ``radius_m`` (equivalent radius of an
+        end cap)}}, ``background_faces`` (int or None), ``problems`` (list of str), ``reason``
+        (one line: what happened and what to change; None when ok).
+    """
+    sizing = state.get("mesh_sizing") or {}
+    min_faces = int(sizing.get("min_patch_faces", state["cfd"]["mesh"].get("min_patch_faces", 1)))
+    try:
+        boundary = read_boundary(case_dir / "constant" / "polyMesh")
+    except (OSError, ValueError) as exc:
+        why = f"no readable mesh boundary after snappyHexMesh ({exc})"
+        return {"ok": False, "patches": {}, "background_faces": None, "problems": [why], "reason": why}
+    patches: dict[str, Any] = {}
+    problems = []
+    for s in state["solids"]:
+        faces = int(boundary.get(s["name"], {}).get("nFaces", 0))
+        info: dict[str, Any] = {"role": s["role"], "faces": faces, "min_faces": min_faces}
+        h = s.get("cell_size_m")
+        if h is not None:
+            info["cell_size_m"] = h
+        if s["role"] in ("inlet", "outlet") and s.get("area_m2"):
+            info["radius_m"] = math.sqrt(s["area_m2"] / math.pi)
+        patches[s["name"]] = info
+        if faces >= min_faces:
+            continue
+        what = "lost in meshing: 0 faces" if faces == 0 else f"under-resolved in meshing: {faces} faces"
+        text = f"{s['name']} {what} (minimum {min_faces})"
+        if h is not None and "radius_m" in info:
+            text += f"; cell size {h * 1e3:.3g} mm vs {s['name']} radius {info['radius_m'] * 1e3:.3g} mm"
+        elif h is not None:
+            text += f"; cell size {h * 1e3:.3g} mm"
+        problems.append(text)
+    bg = int(boundary.get("background", {}).get("nFaces", 0))  # snappyHexMesh removes an empty patch
+    if bg:
+        problems.append(
+            f"the mesh leaked out of the vessel: the background patch (the blockMesh box) has {bg} faces "
+            "(must be 0); the wall STL is not closed or cfd.mesh.inside_point is outside the lumen"
+        )
+    reason = None
+    if problems:
+        source = (sizing.get("cell_size") or {}).get("source")
+        lost = [p for p in problems if "in meshing" in p]
+        advice = {
+            "patient": "lower the patient's cell_size_mm in the patients sheet",
+            "auto": "raise cfd.mesh.cells_across_end (or give a smaller cfd.mesh.cell_size)",
+        }.get(str(source), "lower cfd.mesh.cell_size")
+        reason = "; ".join(problems) + (f"; {advice}" if lost else "")
+    return {"ok": not problems, "patches": patches, "background_faces": bg, "problems": problems, "reason": reason}
+
+
 def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any]:
     """Mesh and solve a rendered case; writes ``status.json``, ``residuals.csv/png``, ``logs/log.*``.
 
     Steps: blockMesh, snappyHexMesh -overwrite (jet refinement cylinder, wall prism layers),
-    checkMesh (failure stops), inlet profile, [decomposePar], simpleFoam start-up (first order)
+    checkMesh, the patch check (:func:`patch_check`: an STL solid lost or under-resolved in
+    meshing, or a leak into the background box, stops before the solver with the reason in
+    words; so does a failed checkMesh), inlet profile, [decomposePar], simpleFoam start-up (first order)
     then main stage (residualControl). If SIMPLE does not converge (or diverges: floating point
     exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
     written (after a divergence, the start-up's) (adjustable time step at Courant number <=
@@ -232,7 +305,10 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         The status (also ``status.json``): ``converged``, ``criterion``, ``criterion_used``
         (``residualControl``, ``time_average_stationary`` or ``none``), ``reason``,
         ``iterations`` (SIMPLE), ``final_residuals``, ``cells``, ``lumen_volume_m3``, ``mesh``
-        (prism-layer coverage, jet refinement), ``mass_imbalance`` (relative), ``flow_rates``
+        (``sizing``: the cell size and why, the background box, the levels; ``patches``: faces per
+        STL solid; ``background_faces``; prism-layer coverage, jet refinement), ``mesh_ok`` and
+        ``stage`` (``mesh`` when meshing stopped the patient), ``inflow`` (the flow rate applied
+        and why: :func:`vcs.cfd.sizing.choose_inflow`), ``mass_imbalance`` (relative), ``flow_rates``
         (m^3/s), ``patch_pressure`` (kinematic, m^2/s^2), ``inlet_minus_outlet_pressure``
         (m^2/s^2 and Pa; negative = pressure recovery), ``wall_shear_stress_Pa`` (and, for a
         time average, ``tawss_Pa`` and ``osi``), ``fields`` (which field files hold the
@@ -271,6 +347,8 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         "units": {"p": "m2/s2 (kinematic); *_Pa = x rho", "wallShearStress": "m2/s2 (kinematic); *_Pa = x rho"},
         "rho": cfd["physics"]["rho"],
         "nu": cfd["physics"]["nu"],
+        "mesh": {"sizing": state.get("mesh_sizing")},  # the cell size and why (render_case)
+        "inflow": state.get("inflow"),  # the flow rate applied and why (render_case)
     }
 
     def finish(reason: str | None = None, failed_log: str | None = None) -> dict[str, Any]:
@@ -310,12 +388,19 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         return finish(_utility_failure(case_dir, "blockMesh"), "blockMesh")
     if run(["snappyHexMesh", "-overwrite"], "snappyHexMesh").returncode != 0:
         return finish(_utility_failure(case_dir, "snappyHexMesh"), "snappyHexMesh")
-    status["mesh"] = _mesh_report(case_dir, state)
+    status["mesh"].update(_mesh_report(case_dir, state))
+    patches = patch_check(case_dir, state)
+    status["mesh"]["patches"] = patches["patches"]
+    status["mesh"]["background_faces"] = patches["background_faces"]
     run(["checkMesh"], "checkMesh")
     ok, cells, why = _check_mesh(case_dir / "logs" / "log.checkMesh")
     status["cells"] = cells
     check_log = (case_dir / "logs" / "log.checkMesh").read_text(errors="replace")
     status["lumen_volume_m3"] = parse_check_mesh_volume(check_log)
+    if not patches["ok"]:  # a lost end or a leak: say so before anything else (checkMesh says OK)
+        status["mesh_ok"] = False
+        status["stage"] = "mesh"
+        return finish(patches["reason"], "snappyHexMesh")
     if not ok:
         status["mesh_ok"] = False
         return finish(why, "checkMesh")
@@ -448,8 +533,8 @@ def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak
     Parameters
     ----------
     state : dict
-        Case description (``cfd.solver.transient``, ``cfd.mesh``, ``flow_rate`` m^3/s,
-        ``jet_region``).
+        Case description (``cfd.solver.transient``, ``flow_rate`` m^3/s, ``mesh_sizing``
+        (smallest cell); without it ``cfd.mesh`` and ``jet_region``).
     volume : float
         Lumen (mesh) volume [m^3].
     start_time : float
@@ -472,11 +557,14 @@ def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak
     t_ft = volume / float(state["flow_rate"])
     washout = _round_up(float(tr["washout_flow_throughs"]) * t_ft)
     window = _round_up(float(tr["flow_throughs"]) * t_ft)
-    m = cfd["mesh"]
-    levels = [*m["surface_level"], *m["wall_level"], *m["inlet_level"], *m["outlet_level"]]
-    if state.get("jet_region"):
-        levels.append(state["jet_region"]["level"])
-    h_min = float(m["cell_size"]) / 2 ** max(int(x) for x in levels)
+    if state.get("mesh_sizing"):
+        h_min = float(state["mesh_sizing"]["smallest_cell_m"])
+    else:  # a state without sizing: a numeric cell size and the configured levels
+        m = cfd["mesh"]
+        levels = [*m["surface_level"], *m["wall_level"], *m["inlet_level"], *m["outlet_level"]]
+        if state.get("jet_region"):
+            levels.append(state["jet_region"]["level"])
+        h_min = float(m["cell_size"]) / 2 ** max(int(x) for x in levels)
     t_w = start_time + washout
     return {
         "flow_through_time_s": t_ft,

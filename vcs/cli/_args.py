@@ -1,17 +1,26 @@
 """Argument helpers shared by the command modules of :mod:`vcs.cli`.
 
-argparse types for integer ranges, options whose value is a point (``--inlet -40,0,0``: a value
-that starts with a minus sign), the output-path checks (an output directory, never an input
-overwritten) and the JSON writer. Imports nothing from the rest of :mod:`vcs.cli`.
+argparse types for integer and float ranges, options whose value is a point (``--inlet -40,0,0``:
+a value that starts with a minus sign), the output-path checks (a file or a directory whose parent
+exists and is writable, never an input overwritten), atomic writes (:func:`atomic_file`,
+:class:`OutputFolder`: a temporary file in the same directory, then :func:`os.replace`; a failed
+rerun into an output folder removes its stale outputs and leaves a failure record) and the JSON
+writer. Imports nothing from the rest of :mod:`vcs.cli`.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import re
-from collections.abc import Callable, Sequence
+import secrets
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
 from vcs.errors import VCSInputError
@@ -41,6 +50,42 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
         if v < minimum:
             raise argparse.ArgumentTypeError(f"{v} must be >= {minimum}")
+        return v
+
+    return parse
+
+
+def float_at_least(minimum: float, *, strict: bool = False, maximum: float | None = None) -> Callable[[str], float]:
+    """An argparse ``type``: the argument as a finite float >= ``minimum`` (> when ``strict``), <= ``maximum``.
+
+    Parameters
+    ----------
+    minimum : float
+        Smallest accepted value.
+    strict : bool
+        Refuse ``minimum`` itself (for sizes that must be positive).
+    maximum : float, optional
+        Largest accepted value.
+
+    Returns
+    -------
+    parse : callable
+        ``parse(text) -> float``; raises :class:`argparse.ArgumentTypeError` (exit code 2) for a
+        non-number, NaN, an infinity, or a value out of range (``--extend-inlet -1`` is an error,
+        not 0).
+    """
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
+        if v < minimum or (strict and v == minimum):
+            raise argparse.ArgumentTypeError(f"{v:g} must be {'>' if strict else '>='} {minimum:g}")
+        if maximum is not None and v > maximum:
+            raise argparse.ArgumentTypeError(f"{v:g} must be <= {maximum:g}")
         return v
 
     return parse
@@ -133,29 +178,38 @@ def join_point_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
-def output_dir(path: PathLike) -> Path:
-    """The output directory ``path``, created (with parents) when missing.
-
-    Parameters
-    ----------
-    path : str or Path
-        The ``-o`` argument.
-
-    Returns
-    -------
-    Path
-        The directory, which exists on return.
+def _writable_parent(p: Path) -> None:
+    """Check that the directory that will hold ``p`` exists, is a directory and can be written.
 
     Raises
     ------
     VCSInputError
-        ``path`` exists and is not a directory.
+        ``p``'s parent is missing, lies under a regular file, or refuses a new file (permissions,
+        read-only file system); one line naming the path and the fix.
     """
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise VCSInputError(f"output '{p}' exists and is not a directory; choose another -o")
-    p.mkdir(parents=True, exist_ok=True)
-    return p
+    parent = p.parent
+    if not parent.is_dir():
+        up = parent
+        while not up.exists() and up != up.parent:
+            up = up.parent
+        if up.exists() and not up.is_dir():
+            raise VCSInputError(f"output '{p}' lies under '{up}', which is a file, not a directory; choose another -o")
+        raise VCSInputError(f"directory '{parent}' does not exist; create it first or choose another -o")
+    try:  # the real test: root ignores permission bits, a read-only file system does not
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=".vcs-write-test-"):
+            pass
+    except OSError as exc:
+        raise VCSInputError(
+            f"cannot write to directory '{parent}' ({exc.strerror or exc}); choose another -o"
+        ) from None
+
+
+def _as_output_path(path: PathLike) -> Path:
+    """``Path(path)``, refusing an empty or NUL-holding name (one line, exit code 2)."""
+    text = str(path)
+    if not text.strip() or "\x00" in text:
+        raise VCSInputError(f"output {text!r} is not a file name; choose another -o")
+    return Path(text)
 
 
 def not_an_input(output: PathLike, *inputs: PathLike | None) -> Path:
@@ -178,11 +232,276 @@ def not_an_input(output: PathLike, *inputs: PathLike | None) -> Path:
     VCSInputError
         ``output`` resolves to the same path as one of ``inputs``.
     """
-    out = Path(output)
+    out = _as_output_path(output)
     for i in inputs:
-        if i is not None and out.resolve() == Path(i).resolve():
+        if i is not None and str(i) and "\x00" not in str(i) and out.resolve() == Path(i).resolve():
             raise VCSInputError(f"output '{out}' is also an input; choose another -o (inputs are never overwritten)")
     return out
+
+
+def output_file(
+    path: PathLike,
+    *inputs: PathLike | None,
+    suffixes: Sequence[str] = (),
+    overwrite: bool = True,
+    option: str = "-o",
+) -> Path:
+    """Check an output file before any work is done: all that can be known about ``path`` up front.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output file the user named.
+    *inputs : str, Path or None
+        The command's inputs (``path`` must be none of them).
+    suffixes : sequence of str
+        Accepted extensions, lower case with the dot (``(".vtu",)``); empty: any.
+    overwrite : bool
+        False: an existing ``path`` is refused (`vcs phantom` without ``--overwrite``).
+    option : str
+        The option that named ``path``, for the message.
+
+    Returns
+    -------
+    Path
+        ``Path(path)``.
+
+    Raises
+    ------
+    VCSInputError
+        ``path`` is a directory, has another extension, is an input, exists (``overwrite``
+        False), or its parent is missing, lies under a regular file or cannot be written.
+    """
+    text = str(path)
+    p = not_an_input(path, *inputs)
+    if p.is_dir() or text.endswith(("/", os.sep)):
+        example = p / f"out{suffixes[0] if suffixes else ''}"
+        raise VCSInputError(f"{option} '{text}' is a directory; give a file name, e.g. {example}")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise VCSInputError(f"{option} '{p}' must end in {' or '.join(suffixes)}")
+    if p.exists() and not overwrite:
+        raise VCSInputError(f"{option} '{p}' exists; choose another file or give --overwrite to replace it")
+    _writable_parent(p)
+    return p
+
+
+def output_dir(path: PathLike, *inputs: PathLike | None, names: Sequence[str] = ()) -> Path:
+    """Check an output directory before any work is done (it is created later, by :class:`OutputFolder`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``-o`` argument: an existing directory or a new one whose parent exists.
+    *inputs : str, Path or None
+        The command's inputs: none may be one of the files ``names`` in the directory.
+    names : sequence of str
+        The files the command writes (or removes when stale) in the directory.
+
+    Returns
+    -------
+    Path
+        ``Path(path)``.
+
+    Raises
+    ------
+    VCSInputError
+        ``path`` exists and is not a directory, its parent is missing or lies under a regular
+        file, it cannot be written, or one of the outputs is an input.
+    """
+    p = _as_output_path(path)
+    if p.exists() and not p.is_dir():
+        raise VCSInputError(f"output '{p}' exists and is not a directory; choose another -o")
+    for name in names:
+        not_an_input(p / name, *inputs)
+    _writable_parent(p / ".vcs" if p.is_dir() else p)
+    return p
+
+
+def _temporary_name(path: Path) -> Path:
+    """A fresh hidden name beside ``path`` with the same extension (writers choose formats by it)."""
+    return path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
+
+
+def remove_leftovers(path: Path) -> list[Path]:
+    """Remove the temporary files of ``path`` left by a run that died while writing (a crash, SIGKILL).
+
+    Only names made by :func:`_temporary_name` whose process no longer exists are removed (a
+    run writing the same output right now keeps its file).
+
+    Parameters
+    ----------
+    path : Path
+        An output file.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(\d+)-[0-9a-f]{8}\.tmp" + re.escape(path.suffix) + "$")
+    removed = []
+    with os.scandir(path.parent) as entries:
+        for e in entries:
+            m = pattern.match(e.name)
+            if m is not None and not _process_exists(int(m.group(1))):
+                Path(e.path).unlink(missing_ok=True)
+                removed.append(Path(e.path))
+    return removed
+
+
+def _process_exists(pid: int) -> bool:
+    """Whether process ``pid`` is running (ours counts)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
+
+
+@contextmanager
+def atomic_file(path: Path) -> Iterator[Path]:
+    """Write ``path`` atomically: yield a temporary name in the same directory, then rename it.
+
+    On success the temporary file replaces ``path`` (:func:`os.replace`: a reader sees the old
+    file or the whole new one, never a part); on any exception (and Ctrl-C) it is removed and
+    ``path`` is left as it was. Temporary files of ``path`` left by a run that died are removed
+    first (:func:`remove_leftovers`).
+
+    Parameters
+    ----------
+    path : Path
+        The output file.
+
+    Yields
+    ------
+    Path
+        Where to write (same directory and extension as ``path``).
+
+    Raises
+    ------
+    VCSInputError
+        The system refused the write (a full disk, a file size limit): one line naming ``path``.
+    """
+    remove_leftovers(path)
+    tmp = _temporary_name(path)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise RuntimeError(f"nothing was written to {tmp}")
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise VCSInputError(f"cannot write '{path}' ({exc.strerror or exc}); nothing was written") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+class OutputFolder:
+    """The outputs of a command that writes several files into one directory (`vcs fit`, `vcs sensitivity`).
+
+    Used as a context manager around the whole computation. Files are written to temporary names
+    (:meth:`file`) and renamed into place together when the block succeeds, in the order of
+    ``names`` (put the file whose presence means "complete" last, e.g. ``model.json``); outputs of
+    an earlier run that this run did not write (e.g. ``residual_map.png`` without
+    ``--residual-png``) and an earlier failure record are removed. When the block fails, the
+    temporary files are removed and so are the outputs of an earlier run (stale: they no longer
+    match what was asked), and ``<command>_failed.json`` (the command line, the error, the files
+    removed) is written in their place, so nothing looks complete when it is not; a directory
+    this run created is removed again when it is left empty.
+
+    Parameters
+    ----------
+    path : Path
+        The directory, checked by :func:`output_dir`; created (not its parents) when missing.
+    names : sequence of str
+        Every file the command can write there.
+    command : str
+        The subcommand (``"fit"``): names the failure record ``fit_failed.json``.
+    """
+
+    def __init__(self, path: Path, names: Sequence[str], command: str) -> None:
+        self.path = path
+        self.names = list(names)
+        self.record = path / f"{command}_failed.json"
+        self.command = command
+        self._staged: dict[str, Path] = {}
+        self._created = False
+
+    def __enter__(self) -> OutputFolder:
+        try:
+            if not self.path.is_dir():
+                self._created = True
+                self.path.mkdir()
+            for name in self.names:
+                remove_leftovers(self.path / name)
+        except BaseException:  # Ctrl-C right after mkdir: __exit__ would not run
+            if self._created and self.path.is_dir() and not any(self.path.iterdir()):
+                self.path.rmdir()
+            raise
+        return self
+
+    def file(self, name: str) -> Path:
+        """The temporary path to write output ``name`` to (renamed into place on success).
+
+        Parameters
+        ----------
+        name : str
+            One of ``names``.
+
+        Returns
+        -------
+        Path
+            A hidden file in the directory with the extension of ``name``.
+        """
+        if name not in self.names:
+            raise ValueError(f"{name} is not an output of vcs {self.command}")
+        self._staged[name] = _temporary_name(self.path / name)
+        return self._staged[name]
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if exc is None:
+            missing = [n for n, t in self._staged.items() if not t.exists()]
+            if missing:
+                self._discard()
+                raise RuntimeError(f"vcs {self.command} did not write {', '.join(missing)}")
+            for name in self.names:
+                if name in self._staged:
+                    os.replace(self._staged[name], self.path / name)
+                else:
+                    (self.path / name).unlink(missing_ok=True)  # an earlier run's, not this one's
+            self.record.unlink(missing_ok=True)
+            return
+        self._discard()
+        stale = [n for n in self.names if (self.path / n).is_file()]
+        for name in stale:
+            (self.path / name).unlink()
+        if stale or self.record.is_file():
+            if isinstance(exc, KeyboardInterrupt):
+                error = "interrupted (Ctrl-C)"
+            else:
+                error = str(exc) or type(exc).__name__
+            record = {
+                "command": f"vcs {self.command}",
+                "error": error,
+                "removed_stale_outputs": stale,
+                "note": f"vcs {self.command} failed; the outputs of an earlier run were removed (they no longer "
+                "match the inputs and options asked for)",
+            }
+            with atomic_file(self.record) as tmp:
+                write_json(tmp, record)
+        elif self._created and not any(self.path.iterdir()):
+            self.path.rmdir()
+
+    def _discard(self) -> None:
+        for tmp in self._staged.values():
+            tmp.unlink(missing_ok=True)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
@@ -191,7 +510,8 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     Parameters
     ----------
     path : Path
-        Output file (overwritten).
+        Output file (overwritten; pass the temporary name of :func:`atomic_file` or
+        :meth:`OutputFolder.file`).
     data : dict
         JSON-serialisable content.
     """

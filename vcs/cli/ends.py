@@ -7,7 +7,7 @@ import shlex
 from pathlib import Path
 from typing import Any
 
-from vcs.cli._args import not_an_input, write_json
+from vcs.cli._args import atomic_file, output_file, write_json
 
 # decimals of coordinates printed per unit: 0.01 mm, 0.001 cm, 0.00001 m
 _DECIMALS = {"mm": 2, "cm": 3, "m": 5}
@@ -16,7 +16,8 @@ _DECIMALS = {"mm": 2, "cm": 3, "m": 5}
 def ends_table(mesh: str | Path, units: str = "auto", cap_array: str | None = "auto") -> dict[str, Any]:
     """The candidate ends of a surface, as `vcs ends` prints and writes them (JSON-ready).
 
-    The surface is read and reduced to its largest component exactly as `vcs fit` does, so
+    The surface is read and reduced to the vessel's component exactly as `vcs fit` does
+    with no end option (:func:`vcs.vessel.vessel_component`), so
     ``end:N`` here is ``end:N`` there.
 
     Parameters
@@ -45,9 +46,9 @@ def ends_table(mesh: str | Path, units: str = "auto", cap_array: str | None = "a
     """
     from vcs.ends import list_ends
     from vcs.io import read_surface
-    from vcs.vessel import largest_component
+    from vcs.vessel import vessel_component
 
-    surf = largest_component(read_surface(mesh, units))
+    surf = vessel_component(read_surface(mesh, units))
     listing = list_ends(
         surf.vertices, surf.faces, surf.cell_data, cap_array=cap_array, lumen_radius=surf.lumen_radius_mm
     )
@@ -113,7 +114,7 @@ def cmd_ends(args: argparse.Namespace) -> None:
     VCSInputError
         Bad input (reported by :func:`vcs.cli.main.main` as one line, exit code 2).
     """
-    out = None if args.output is None else not_an_input(args.output, args.mesh)
+    out = None if args.output is None else output_file(args.output, args.mesh, suffixes=(".json",))
     table = ends_table(args.mesh, args.units, None if args.cap_array == "none" else args.cap_array)
     u = table["units"]
     rows = table["candidates"]
@@ -146,7 +147,8 @@ def cmd_ends(args: argparse.Namespace) -> None:
     for w in table["warnings"]:
         print(f"warning: {w}")
     if out is not None:
-        write_json(out, table)
+        with atomic_file(out) as tmp:
+            write_json(tmp, table)
         print(f"-> {out}")
 
 
@@ -168,5 +170,5 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument(
         "--cap-array", default="auto", help="cell array labelling caps (auto: ModelFaceID, CapID, ...; none: ignore)"
     )
-    e.add_argument("-o", "--output", help="also write the list as JSON (e.g. ends.json)")
+    e.add_argument("-o", "--output", help="also write the list as .json (e.g. ends.json)")
     e.set_defaults(func=cmd_ends)

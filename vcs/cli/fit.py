@@ -7,11 +7,25 @@ import sys
 
 import numpy as np
 
-from vcs.cli._args import add_point_argument, non_negative_int, not_an_input, output_dir, positive_int, write_json
+from vcs.cli._args import (
+    OutputFolder,
+    add_point_argument,
+    non_negative_int,
+    output_dir,
+    positive_int,
+    write_json,
+)
+
+OUTPUTS = ("centerline.vtp", "wall_residuals.vtp", "residual_map.png", "fit_report.json", "model.json")
+"""The files `vcs fit` writes (or removes when stale), in the order they are put in place: model.json last."""
 
 
 def cmd_fit(args: argparse.Namespace) -> None:
     """Run `vcs fit`: model.json, fit_report.json, centerline.vtp, wall_residuals.vtp in ``args.output``.
+
+    The outputs are written to temporary files and put in place together when the fit succeeds
+    (model.json last); a failed fit into a folder holding an earlier fit removes that fit's files
+    and writes ``fit_failed.json`` instead (:class:`vcs.cli._args.OutputFolder`).
 
     Parameters
     ----------
@@ -28,50 +42,49 @@ def cmd_fit(args: argparse.Namespace) -> None:
     from vcs.mesh import write_points_vtp, write_polyline_vtp
     from vcs.vessel import fit_vessel
 
-    out = output_dir(args.output)
-    for name in ("model.json", "fit_report.json", "centerline.vtp", "wall_residuals.vtp"):
-        not_an_input(out / name, args.mesh, args.inlet_cap, args.outlet_cap)
-    model, report, wall_fit = fit_vessel(
-        args.mesh,
-        units=args.units,
-        inlet=args.inlet,
-        outlet=args.outlet,
-        inlet_cap=args.inlet_cap,
-        outlet_cap=args.outlet_cap,
-        cap_array=args.cap_array,
-        L=args.L,
-        K=args.K,
-        R=args.R,
-        recentre_iterations=args.recentre,
-    )
-    s = model.scale_to_mm
-    tau = np.linspace(0, 1, 401)
-    t, v1, v2 = model.vcs.frame(tau)
-    write_polyline_vtp(
-        out / "centerline.vtp",
-        model.vcs.curve(tau) / s,
-        {"tau": tau, "t": t, "v1": v1, "v2": v2, "curvature_per_mm": model.vcs.curvature(tau)},
-    )
-    if wall_fit is not None:
-        write_points_vtp(
-            out / "wall_residuals.vtp",
-            wall_fit.points / s,
-            {
-                "residual": wall_fit.residual / s,
-                "tau": wall_fit.tau,
-                "theta": wall_fit.theta,
-                "rho": wall_fit.rho / s,
-                "used": wall_fit.used.astype(np.int8),
-                "reason": wall_fit.reason,
-            },
+    out = output_dir(args.output, args.mesh, args.inlet_cap, args.outlet_cap, names=(*OUTPUTS, "fit_failed.json"))
+    with OutputFolder(out, OUTPUTS, "fit") as folder:
+        model, report, wall_fit = fit_vessel(
+            args.mesh,
+            units=args.units,
+            inlet=args.inlet,
+            outlet=args.outlet,
+            inlet_cap=args.inlet_cap,
+            outlet_cap=args.outlet_cap,
+            cap_array=args.cap_array,
+            L=args.L,
+            K=args.K,
+            R=args.R,
+            recentre_iterations=args.recentre,
         )
-        if args.residual_png:
-            from vcs.plots import residual_map
+        s = model.scale_to_mm
+        tau = np.linspace(0, 1, 401)
+        t, v1, v2 = model.vcs.frame(tau)
+        write_polyline_vtp(
+            folder.file("centerline.vtp"),
+            model.vcs.curve(tau) / s,
+            {"tau": tau, "t": t, "v1": v1, "v2": v2, "curvature_per_mm": model.vcs.curvature(tau)},
+        )
+        if wall_fit is not None:
+            write_points_vtp(
+                folder.file("wall_residuals.vtp"),
+                wall_fit.points / s,
+                {
+                    "residual": wall_fit.residual / s,
+                    "tau": wall_fit.tau,
+                    "theta": wall_fit.theta,
+                    "rho": wall_fit.rho / s,
+                    "used": wall_fit.used.astype(np.int8),
+                    "reason": wall_fit.reason,
+                },
+            )
+            if args.residual_png:
+                from vcs.plots import residual_map
 
-            residual_map(wall_fit, out / "residual_map.png")
-    report["outputs_units"] = model.units
-    write_json(out / "fit_report.json", report)
-    model.save(out / "model.json")  # last and atomic: its presence means the fit is complete
+                residual_map(wall_fit, folder.file("residual_map.png"))
+        report["outputs_units"] = model.units
+        write_json(folder.file("fit_report.json"), report)
+        model.save(folder.file("model.json"))  # put in place last: its presence means the fit is complete
     msg = f"fitted {args.mesh}: ends by {report['ends_method']}, length {report['centerline_length_mm']:.1f} mm"
     if wall_fit is not None:
         msg += (
@@ -109,7 +122,13 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """
     f = subparsers.add_parser("fit", help="fit the VCS and wall model of a vessel section")
     f.add_argument("mesh", help="wall surface: STL, VTP, VTK, PLY or OBJ")
-    f.add_argument("-o", "--output", required=True, help="output directory")
+    f.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output directory (created if missing; its parent must exist); a failed fit removes an earlier "
+        "fit's files there and writes fit_failed.json",
+    )
     f.add_argument(
         "--units",
         default="auto",

@@ -1,6 +1,7 @@
 """Command line: `vcs fit|ends|coords|cartesian|wall|grid|phantom|sensitivity`.
 
-Bad input ends with one line on stderr naming the problem and the fix, and exit code 2.
+Bad input ends with one line on stderr naming the problem and the fix, and exit code 2; running
+out of memory is exit code 3 (not the input's fault: a coarser mesh or grid, or more memory).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import logging
 import sys
 import warnings
 from collections.abc import Sequence
+from typing import NoReturn
 
 from vcs.cli._args import join_point_values
 from vcs.cli.ends import add_commands as add_ends_commands
@@ -30,20 +32,67 @@ _COMMAND_GROUPS = (
     add_sensitivity_commands,
 )
 
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_MEMORY, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+"""Exit codes of `vcs`: success, a bug (report it), bad input (fix it), out of memory, Ctrl-C."""
+
+# characters str.splitlines() breaks at: escaped so that an error is always one line
+_LINE_BREAKS = str.maketrans({c: repr(c)[1:-1] for c in "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"})
+
+
+def one_line(text: str) -> str:
+    """``text`` with line breaks escaped (``\\n``): a path or value holding one cannot split a message.
+
+    Parameters
+    ----------
+    text : str
+        A message.
+
+    Returns
+    -------
+    str
+        The message on one line.
+    """
+    return text.translate(_LINE_BREAKS)
+
+
+class _Parser(argparse.ArgumentParser):
+    """The `vcs` parsers: no abbreviated options (``--outp`` is not ``--output``), and a usage
+    error is one line, ``vcs CMD: error: ... (see vcs CMD --help)``, exit code 2."""
+
+    def __init__(self, **kwargs: object) -> None:
+        kwargs["allow_abbrev"] = False
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_INPUT, one_line(f"{self.prog}: error: {message} (see {self.prog} --help)") + "\n")
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The `vcs` argument parser with every subcommand.
+
+    Every parser refuses abbreviated options (``allow_abbrev=False``), and ``-v`` is accepted
+    before or after the subcommand (it is added to each subparser with a suppressed default, so
+    that it never resets a ``-v`` given before the subcommand).
 
     Returns
     -------
     argparse.ArgumentParser
         ``prog="vcs"``; each subcommand sets ``func`` (its ``cmd_*`` function) and ``command``.
     """
-    p = argparse.ArgumentParser(prog="vcs", description=__doc__.splitlines()[0])
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
-    sub = p.add_subparsers(dest="command", required=True)
+    p = _Parser(
+        prog="vcs",
+        description=__doc__.splitlines()[0],
+        epilog="exit codes: 0 done, 2 bad input or a refused output (one line says what to fix), "
+        "3 out of memory, 130 interrupted, 1 internal error (a bug; -v shows the traceback)",
+    )
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr; tracebacks of internal errors")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for add_commands in _COMMAND_GROUPS:
         add_commands(sub)
+    for sp in sub.choices.values():
+        sp.add_argument(
+            "-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="as vcs -v (anywhere on the line)"
+        )
     return p
 
 
@@ -60,9 +109,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     argparse.Namespace
         As :meth:`argparse.ArgumentParser.parse_args` of :func:`build_parser`, after
         :func:`vcs.cli._args.join_point_values` (``--inlet -40,0,0`` -> ``--inlet=-40,0,0``).
+        An unknown argument is reported by the subcommand's parser (``vcs fit: error:
+        unrecognized arguments: --rec 2``), exit code 2.
     """
     parser = build_parser()
-    return parser.parse_args(join_point_values(sys.argv[1:] if argv is None else list(argv)))
+    args, extra = parser.parse_known_args(join_point_values(sys.argv[1:] if argv is None else list(argv)))
+    if extra:
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        sub.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -76,30 +131,47 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 success, 2 bad input (one line ``vcs <command>: error: ...`` on stderr),
-        1 internal error (one line; with ``-v`` the exception propagates instead). Invalid
-        arguments and ``--help`` leave through argparse's ``SystemExit`` (codes 2 and 0).
+        Exit code (:data:`EXIT_OK` ...): 0 success; 2 bad input, the user can fix it (one line
+        ``vcs <command>: error: ...`` on stderr; also an input or output the system refuses:
+        permissions, a full disk); 3 out of memory (one line; the input is not wrong, it is too
+        big for this machine: coarsen the mesh or the grid, or use more memory); 1 internal
+        error, a bug (one line; with ``-v`` the exception propagates with its traceback); 130
+        interrupted (Ctrl-C; temporary files removed). Invalid arguments (one line) and
+        ``--help`` leave through argparse's ``SystemExit`` (codes 2 and 0).
     """
     args = parse_args(argv)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
-    if not args.verbose:  # numerical warnings are for developers; users get fit_report warnings
-        warnings.simplefilter("ignore")
-    try:
-        args.func(args)
-    except VCSInputError as exc:
-        print(f"vcs {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except MemoryError:
-        print(f"vcs {args.command}: error: out of memory; coarsen the input mesh or the grid", file=sys.stderr)
-        return 2
-    except Exception as exc:  # a bug, not bad input: one line, the traceback only with -v
-        if args.verbose:
-            raise
-        print(
-            f"vcs {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with -v and report it)",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    prefix = f"vcs {args.command}"
+    with warnings.catch_warnings():
+        if not args.verbose:  # numerical warnings are for developers; users get fit_report warnings
+            warnings.simplefilter("ignore")
+        try:
+            args.func(args)
+        except VCSInputError as exc:
+            print(one_line(f"{prefix}: error: {exc}"), file=sys.stderr)
+            return EXIT_INPUT
+        except MemoryError:
+            print(
+                f"{prefix}: out of memory: the input or the requested grid is too large for this machine; "
+                "coarsen the mesh or the grid, or run it with more memory (exit code 3)",
+                file=sys.stderr,
+            )
+            return EXIT_MEMORY
+        except OSError as exc:  # the system refused a file: permissions, a full disk, a vanished directory
+            where = f" '{exc.filename}'" if exc.filename else ""
+            print(one_line(f"{prefix}: error: cannot access{where}: {exc.strerror or exc}"), file=sys.stderr)
+            return EXIT_INPUT
+        except KeyboardInterrupt:
+            print(f"{prefix}: interrupted; no partial output left behind", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except Exception as exc:  # a bug, not bad input: one line, the traceback only with -v
+            if args.verbose:
+                raise
+            print(
+                one_line(f"{prefix}: internal error: {type(exc).__name__}: {exc} (rerun with -v and report it)"),
+                file=sys.stderr,
+            )
+            return EXIT_INTERNAL
+    return EXIT_OK

@@ -6,7 +6,9 @@ import argparse
 
 import numpy as np
 
-from vcs.cli._args import output_dir
+from vcs.cli._args import OutputFolder, output_dir
+
+OUTPUTS = ("sensitivity.csv", "sensitivity.png")
 
 
 def cmd_sensitivity(args: argparse.Namespace) -> None:
@@ -16,7 +18,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> None:
     ----------
     args : argparse.Namespace
         ``meshes`` (surfaces whose two ends are found automatically), ``L``, ``K``, ``R`` (range
-        strings ``a:b:s`` or ``a``), ``units`` and ``output`` (directory, created when missing).
+        strings ``a:b:s`` or ``a``), ``units`` and ``output`` (directory, created when missing; its
+        parent must exist). Both files are put in place when the sweep succeeds; a failed sweep
+        removes an earlier sweep's files there and writes ``sensitivity_failed.json``.
         Residuals are in mm.
 
     Raises
@@ -28,11 +32,12 @@ def cmd_sensitivity(args: argparse.Namespace) -> None:
     from vcs.sensitivity import parse_range, plot_sweep, residual_sweep
 
     Ls, Ks, Rs = (parse_range(getattr(args, n), n) for n in ("L", "K", "R"))
-    out = output_dir(args.output)  # before the sweep: a bad -o fails at once
-    surfaces = [read_surface(m, args.units) for m in args.meshes]
-    rows = residual_sweep(surfaces, Ls, Ks, Rs)
-    write_csv(out / "sensitivity.csv", {k: np.array([r[k] for r in rows]) for k in rows[0]})
-    plot_sweep(rows, out / "sensitivity.png")
+    out = output_dir(args.output, *args.meshes, names=(*OUTPUTS, "sensitivity_failed.json"))  # before the sweep
+    with OutputFolder(out, OUTPUTS, "sensitivity") as folder:
+        surfaces = [read_surface(m, args.units) for m in args.meshes]
+        rows = residual_sweep(surfaces, Ls, Ks, Rs)
+        write_csv(folder.file("sensitivity.csv"), {k: np.array([r[k] for r in rows]) for k in rows[0]})
+        plot_sweep(rows, folder.file("sensitivity.png"))
     best = min(rows, key=lambda r: r["residual_mean_mm"])
     print(
         f"{len(rows)} settings x {len(surfaces)} meshes -> {out}; lowest mean residual "

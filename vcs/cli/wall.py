@@ -1,4 +1,8 @@
-"""`vcs wall` and `vcs grid`: the model wall (Eq. 8) as a closed STL, the measurement grid as VTU."""
+"""`vcs wall` and `vcs grid`: the model wall (Eq. 8) as a closed STL, the measurement grid as VTU.
+
+Both write in the units of the fitted mesh (``units.input`` of model.json) unless ``--units`` says
+otherwise, like every other output of a fit (`vcs coords`, centerline.vtp).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +10,7 @@ import argparse
 
 import numpy as np
 
-from vcs.cli._args import int_at_least, not_an_input, positive_int
+from vcs.cli._args import atomic_file, float_at_least, int_at_least, output_file, positive_int
 from vcs.errors import VCSInputError
 from vcs.grid import GRID_DEFAULTS
 from vcs.io import UNIT_TO_MM
@@ -20,23 +24,24 @@ def cmd_wall(args: argparse.Namespace) -> None:
     args : argparse.Namespace
         ``model`` (model.json), ``output`` (.stl), ``n_tau`` (axial intervals or None: square
         quads), ``n_theta`` (vertices around), ``extend_inlet``/``extend_outlet`` (straight
-        extensions, in diameters) and ``units`` (of the STL: mm, cm or m).
+        extensions, in diameters, >= 0) and ``units`` (of the STL: mm, cm or m; None: the units
+        of the fitted mesh, recorded in model.json).
 
     Raises
     ------
     VCSInputError
-        The output does not end in .stl or is the input model.
+        The output does not end in .stl, is the input model, is a directory or cannot be
+        written; the model wall folds or is not closed.
     """
     from vcs.surface import check_closed, fold_check, wall_mesh, write_multisolid_stl
     from vcs.vessel import VesselModel
 
+    out = output_file(args.output, args.model, suffixes=(".stl",))
     model = VesselModel.load(args.model)
+    units = args.units or model.units
     mesh = wall_mesh(
         model, n_tau=args.n_tau, n_theta=args.n_theta, extend_inlet=args.extend_inlet, extend_outlet=args.extend_outlet
     )
-    out = not_an_input(args.output, args.model)
-    if out.suffix.lower() != ".stl":
-        raise VCSInputError(f"output '{out}' must end in .stl")
     fold = fold_check(model)
     if fold["min_radius_mm"] <= 0:
         raise VCSInputError(
@@ -56,10 +61,10 @@ def cmd_wall(args: argparse.Namespace) -> None:
             f"{check['winding_consistent']}, volume {check['volume_mm3']:.4g} mm3, Euler number "
             f"{check['euler_number']}): the wall model folds over itself; check fit_report.json and refit"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_multisolid_stl(mesh, out, scale=1.0 / UNIT_TO_MM[args.units])
+    with atomic_file(out) as tmp:
+        write_multisolid_stl(mesh, tmp, scale=1.0 / UNIT_TO_MM[units])
     print(
-        f"wall (Eq. 8) with {len(mesh.faces)} triangles, solids wall/inlet/outlet, in {args.units} -> {out}; "
+        f"wall (Eq. 8) with {len(mesh.faces)} triangles, solids wall/inlet/outlet, in {units} -> {out}; "
         f"closed, volume {check['volume_mm3']:.6g} mm3, smallest angle {check['min_angle_deg']:.1f} deg"
     )
 
@@ -71,31 +76,36 @@ def cmd_grid(args: argparse.Namespace) -> None:
     ----------
     args : argparse.Namespace
         ``model`` (model.json), ``output`` (.vtu), ``n_tau``, ``n_theta``, ``n_rho`` (grid sizes),
-        ``scheme`` (cylindrical or ogrid) and ``units`` (of the VTU points: mm, cm or m). Point
-        data: ``tau``, ``theta`` (rad), ``rho_n`` (rho / rho_w, in [0, 1]).
+        ``scheme`` (cylindrical or ogrid) and ``units`` (of the VTU points: mm, cm or m; None:
+        the units of the fitted mesh, recorded in model.json). Point data: ``tau``, ``theta``
+        (rad), ``rho_n`` (rho / rho_w, in [0, 1]).
+
+    Raises
+    ------
+    VCSInputError
+        The output does not end in .vtu, is the input model, is a directory or cannot be written.
     """
     import pyvista as pv
 
     from vcs.grid import measurement_grid
     from vcs.vessel import VesselModel
 
-    out = not_an_input(args.output, args.model)
-    if out.suffix.lower() != ".vtu":
-        raise VCSInputError(f"output '{out}' must end in .vtu (a VTK unstructured grid)")
+    out = output_file(args.output, args.model, suffixes=(".vtu",))
     model = VesselModel.load(args.model)
+    units = args.units or model.units
     g = measurement_grid(model, n_tau=args.n_tau, n_theta=args.n_theta, n_rho=args.n_rho, scheme=args.scheme)
     cells = np.hstack([np.full((len(g.cells), 1), 8), g.cells]).ravel()
     ug = pv.UnstructuredGrid(
-        cells, np.full(len(g.cells), pv.CellType.HEXAHEDRON, np.uint8), g.points / UNIT_TO_MM[args.units]
+        cells, np.full(len(g.cells), pv.CellType.HEXAHEDRON, np.uint8), g.points / UNIT_TO_MM[units]
     )
     ug.point_data["tau"] = g.tau
     ug.point_data["theta"] = g.theta
     ug.point_data["rho_n"] = g.rho_n
-    out.parent.mkdir(parents=True, exist_ok=True)
-    ug.save(str(out))
+    with atomic_file(out) as tmp:
+        ug.save(str(tmp))
     print(
         f"{args.scheme} grid {args.n_tau}x{args.n_theta}x{args.n_rho}: {ug.n_points} points, "
-        f"{ug.n_cells} cells -> {out}"
+        f"{ug.n_cells} cells, in {units} -> {out}"
     )
 
 
@@ -111,10 +121,16 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     w.add_argument("model", help="model.json from `vcs fit`")
     w.add_argument("-o", "--output", required=True, help="output .stl")
     w.add_argument("--n-tau", type=positive_int, default=None, help="axial intervals (default: square quads)")
-    w.add_argument("--n-theta", type=positive_int, default=64, help="vertices around the circumference")
-    w.add_argument("--extend-inlet", type=float, default=0.0, help="straight inlet extension, in diameters")
-    w.add_argument("--extend-outlet", type=float, default=0.0, help="straight outlet extension, in diameters")
-    w.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the STL (OpenFOAM: m)")
+    w.add_argument("--n-theta", type=int_at_least(8), default=64, help="vertices around the circumference (>= 8)")
+    extension = float_at_least(0.0, maximum=100.0)
+    w.add_argument("--extend-inlet", type=extension, default=0.0, help="straight inlet extension, 0-100 diameters")
+    w.add_argument("--extend-outlet", type=extension, default=0.0, help="straight outlet extension, 0-100 diameters")
+    w.add_argument(
+        "--units",
+        default=None,
+        choices=["mm", "cm", "m"],
+        help="units of the STL (OpenFOAM: m); default: the units of the fitted mesh (model.json)",
+    )
     w.set_defaults(func=cmd_wall)
 
     g = subparsers.add_parser("grid", help="write the (tau, theta, rho_n) measurement grid as VTU")
@@ -141,5 +157,10 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         choices=["cylindrical", "ogrid"],
         help="cylindrical: the paper's grid, the nodes of fields.npz; ogrid: Cartesian core (visual)",
     )
-    g.add_argument("--units", default="mm", choices=["mm", "cm", "m"], help="units of the VTU points")
+    g.add_argument(
+        "--units",
+        default=None,
+        choices=["mm", "cm", "m"],
+        help="units of the VTU points; default: the units of the fitted mesh (model.json)",
+    )
     g.set_defaults(func=cmd_grid)

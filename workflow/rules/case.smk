@@ -1,4 +1,5 @@
-# OpenFOAM case set-up (vcs.cfd.render_case): dictionaries from templates/openfoam + the wall STL.
+# OpenFOAM case set-up (vcs.cfd.render_case): dictionaries from templates/openfoam + the wall STL,
+# the mesh sized to the vessel (model.json) and the patient's own cell size / inflow (sheet).
 
 
 rule openfoam_case:
@@ -6,10 +7,12 @@ rule openfoam_case:
         "../envs/vcs.yaml"
     input:
         stl="results/patients/{id}/wall/wall.stl",
+        model="results/patients/{id}/fit/model.json",  # sizes the mesh (cfd.mesh.cell_size: auto)
     output:
         case=directory("results/patients/{id}/case_setup"),
     params:
         cfd=cfd_params(),
+        patient=patient_cfd,
     log:
         "results/logs/openfoam_case/{id}.log",
     benchmark:

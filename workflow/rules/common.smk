@@ -15,7 +15,18 @@ from snakemake.utils import validate
 
 ID_PATTERN = r"[A-Za-z0-9_-]+"
 DEMO_MESH = re.compile(r"results/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<seed>[0-9]+)\.stl")
-SHEET_COLUMNS = ("id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap")
+SHEET_COLUMNS = (
+    "id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap",
+    "cell_size_mm", "flow_rate_l_min", "inlet_velocity_m_s", "valve_area_cm2",
+)
+# optional per-patient CFD columns: number in the sheet's unit -> (key of vcs.cfd.render_case's
+# `patient`, factor to SI); cell_size_mm may also be `auto`
+PATIENT_CFD_COLUMNS = {
+    "cell_size_mm": ("cell_size", 1e-3),
+    "flow_rate_l_min": ("flow_rate", 1e-3 / 60.0),
+    "inlet_velocity_m_s": ("velocity", 1.0),
+    "valve_area_cm2": ("valve_area", 1e-4),
+}
 
 # The `vcs` console script lives beside this Python (the project's venv): put it on PATH so that
 # shell rules work without an activated venv (also inside SLURM jobs, which run this file again).
@@ -113,14 +124,29 @@ def load_patients(sheet):
             fail(f"patients sheet '{sheet}' line {n}: id '{pid}' already used on line {first_line[pid]}; ids must be unique")
         first_line[pid] = n
         record = {k: v for k, v in row.items() if v != ""}
+        for column in PATIENT_CFD_COLUMNS:
+            if column in record and not (column == "cell_size_mm" and record[column] == "auto"):
+                try:
+                    record[column] = float(record[column])
+                except ValueError:
+                    fail(
+                        f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{record[column]}' is not a number"
+                        + (" (or auto)" if column == "cell_size_mm" else "")
+                    )
         try:
             validate(record, schema="../schemas/patients.schema.yaml")
         except WorkflowError as exc:
             msg = _validation_message(exc)
-            if "should not be valid under" in msg:
+            if "should not be valid under" in msg and "flow_rate_l_min" in msg.split("should not be valid under")[1]:
+                msg = "give the inflow either as flow_rate_l_min or as inlet_velocity_m_s + valve_area_cm2, not both"
+            elif "should not be valid under" in msg:
                 msg = "give the ends either as inlet/outlet points or as inlet_cap/outlet_cap files, not both"
+            elif "is a dependency of" in msg and ("velocity" in msg or "valve_area" in msg):
+                msg = f"{msg.split(': ', 1)[-1]}: the inflow needs both inlet_velocity_m_s and valve_area_cm2"
             elif "is a dependency of" in msg:
                 msg = f"{msg.split(': ', 1)[-1]}: the ends need both inlet and outlet (points or caps)"
+            elif msg.startswith("cell_size_mm:"):
+                msg = f"cell_size_mm {record['cell_size_mm']} must be auto or a number of mm in [0.05, 50]"
             elif "does not match" in msg:
                 column = msg.split(":", 1)[0]
                 msg = (
@@ -188,6 +214,21 @@ def wall_n_tau_option():
 def cfd_params():
     """The cfd block as rendered (flavour auto -> detected at render time)."""
     return config["cfd"]
+
+
+def patient_cfd(wildcards):
+    """The patient's own CFD values from the sheet, in SI units (vcs.cfd.render_case `patient`):
+    cell_size (m or "auto"), flow_rate (m3/s), velocity (m/s) + valve_area (m2). A param, so
+    editing one patient's values reruns that patient's CFD only."""
+    row = PATIENTS[wildcards.id]
+    out = {}
+    for column, (key, factor) in PATIENT_CFD_COLUMNS.items():
+        value = row.get(column)
+        if value == "auto" and config["cfd"].get("mesh", {}).get("cell_size", "auto") == "auto":
+            continue  # the config's own value: no change (and no rerun)
+        if value is not None:
+            out[key] = value if value == "auto" else value * factor
+    return out
 
 
 def solve_ranks():

@@ -29,9 +29,17 @@ def main(smk):
         (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps(upstream) + "\n")
         return
     cfd = json.loads(json.dumps(dict(smk.params.cfd)))  # plain dicts/lists
+    patient = json.loads(json.dumps(dict(smk.params.patient)))
     flavour = cfd.pop("flavour", "auto")
     try:
-        state = render_case(smk.output.case, smk.input.stl, cfd, flavour=None if flavour == "auto" else flavour)
+        state = render_case(
+            smk.output.case,
+            smk.input.stl,
+            cfd,
+            flavour=None if flavour == "auto" else flavour,
+            model=smk.input.model,
+            patient=patient,
+        )
     except Exception as exc:  # this patient's geometry cannot be set up: a per-patient failure,
         # recorded for openfoam_solve -> status.json -> atlas exclusion, not a cohort stop
         reason = f"case set-up failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
@@ -40,14 +48,18 @@ def main(smk):
         record = {"stage": "case", "reason": reason, "log": str(Path(smk.log[0]).resolve())}
         (Path(smk.output.case) / SETUP_FAILED).write_text(json.dumps(record) + "\n")
         return
+    sizing = state["mesh_sizing"]
     log.info(
-        "case for %s (flavour %s): background %s cells of %g m, inside point %s, Q %.4g m3/s -> %s",
+        "case for %s (flavour %s): cell size %.4g mm (%s); background %s; inside point %s; "
+        "inflow %.4g L/min (%s) -> %s",
         smk.wildcards.id,
         state["flavour"],
-        "x".join(map(str, state["ncells"])),
-        state["cfd"]["mesh"]["cell_size"],
+        sizing["cell_size_m"] * 1e3,
+        sizing["cell_size"]["why"],
+        sizing["background"]["why"],
         state["inside_point"],
-        state["flow_rate"],
+        state["inflow"]["flow_rate_l_min"],
+        state["inflow"]["why"],
         smk.output.case,
     )
 
