@@ -1,5 +1,5 @@
 """Curved-pipe verification (marker ``openfoam``): developed laminar Dean flow in a torus arc
-against the friction-factor correlation of Ito (1959), through the normal pipeline (phantom ->
+against the friction-factor correlation of White (1929), through the normal pipeline (phantom ->
 fit -> Eq. 8 wall -> case -> simpleFoam on 2 ranks -> resampling on the VCS grid).
 
 The finer meshes of the same case are bench/curved_pipe.py (README, "Curved pipe")."""
@@ -38,9 +38,11 @@ WINDOW = (90.0, 270.0)
 @pytest.mark.openfoam
 @needs_foam
 def test_curved_pipe_dean_friction_factor(tmp_path):
-    """f_c / f_s of the developed flow within 5 % of Ito's 21.5 De / (1.56 + log10 De)^5.73 at
-    De = 194 (measured: +2.9 %; White's 1929 correlation is 3.9 % above Ito's here: the spread
-    of the published correlations, which come from less curved pipes than a / R = 0.15)."""
+    """f_c / f_s of the developed flow within 4 % of White's 1 / {1 - [1 - (11.6 / De)^0.45]^(1 / 0.45)}
+    at De = 194 (measured -1.0 % on this mesh; -1.3 % to +2.7 % on the bench's finer meshes). Ito's
+    1959 correlation is 3.9 % below White's here (+2.9 % on this mesh): the spread of the published
+    correlations, which come from less curved pipes than a / R = 0.15. A case run with a 10 %
+    higher viscosity than assumed gives +5.0 % and fails."""
     ph = make_phantom("torus", resolution=0.5, major_radius_mm=R, tube_radius_mm=A, arc_angle_deg=ARC)
     write_stl(ph, tmp_path / "torus.stl")
     model, _, _ = fit_vessel(tmp_path / "torus.stl", units="mm")
@@ -74,22 +76,22 @@ def test_curved_pipe_dean_friction_factor(tmp_path):
 
     developed = ratio(*WINDOW)
     de = dean_number(RE, A, R)
-    ito = ito_friction_ratio(de)
+    white = white_friction_ratio(de)
     print(
         f"De {de:.1f}: f_c/f_s {developed:.4f} over {WINDOW} deg; "
-        f"Ito {ito:.4f} ({100 * (developed / ito - 1):+.2f} %), "
-        f"White {white_friction_ratio(de):.4f}; halves {ratio(90, 180):.4f} {ratio(180, 270):.4f}; "
+        f"White {white:.4f} ({100 * (developed / white - 1):+.2f} %), "
+        f"Ito {ito_friction_ratio(de):.4f}; halves {ratio(90, 180):.4f} {ratio(180, 270):.4f}; "
         f"first 30 deg {ratio(0, 30):.4f}; cells {st['cells']}, {st['iterations']} iterations"
     )
     assert de == pytest.approx(193.7, abs=0.1)
     # developed: the two halves of the window agree (measured 1.902, 1.884)
     assert ratio(90, 180) == pytest.approx(ratio(180, 270), rel=0.03)
     # the developed gradient (straight-line fit) and the pressure drop between the window's end
-    # sections (Pa) against Ito's correlation
-    assert developed == pytest.approx(ito, rel=0.05)
+    # sections (Pa) against White's correlation
+    assert developed == pytest.approx(white, rel=0.04)
     s0, s1 = WINDOW[0] * per_deg, WINDOW[1] * per_deg
     dp = 1060.0 * (np.interp(s0, s, p_mean) - np.interp(s1, s, p_mean))
-    assert dp == pytest.approx(1060.0 * ito * g_hp * (s1 - s0), rel=0.05)
+    assert dp == pytest.approx(1060.0 * white * g_hp * (s1 - s0), rel=0.04)
     # and the inflow is a straight pipe's developed flow: the first 30 degrees are far below
     # the curved pipe's friction (measured 1.22), the curvature is what raises it
     assert ratio(0, 30) < 0.75 * developed
