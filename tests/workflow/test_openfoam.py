@@ -529,7 +529,7 @@ def test_render_jet_mesh_and_transient_stages(tmp_path, flavour):
 def test_paper_config_is_the_papers_jet(tmp_path):
     """config/paper.yaml over config/config.yaml (as ``--configfile`` merges it) is valid and is the
     paper's set-up (Section 2.4.1): 1.2 m/s over 1 cm2 (Q 1.2e-4 m3/s), nu 3.37e-6 m2/s, steady
-    SIMPLE to 1e-5 first, the transient time average over >= 5 flow-through times otherwise."""
+    SIMPLE to 1e-5 first, the transient time average over >= 10 flow-through times otherwise."""
     import yaml
     from snakemake.utils import validate
 
@@ -542,7 +542,8 @@ def test_paper_config_is_the_papers_jet(tmp_path):
     cfd = cfg["cfd"]
     assert cfd["inlet"] == {**cfd["inlet"], "type": "jet", "velocity": 1.2, "valve_area": 1.0e-4, "flow_rate": None}
     assert cfd["physics"]["nu"] == pytest.approx(3.37e-6) and cfd["solver"]["tolerance"] == pytest.approx(1e-5)
-    assert cfd["solver"]["fallback"] == "transient" and cfd["solver"]["transient"]["flow_throughs"] >= 5
+    # 10 flow-through times: 5 were not stationary in U on demo aorta seed 3 (README, measured)
+    assert cfd["solver"]["fallback"] == "transient" and cfd["solver"]["transient"]["flow_throughs"] >= 10
     assert cfd["mesh"]["layers"] > 0 and cfd["mesh"]["jet_refinement"]["enabled"]
     cfd.pop("flavour")
     state = render_case(tmp_path / "paper", _tube(tmp_path), cfd, flavour="esi")
