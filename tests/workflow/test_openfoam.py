@@ -805,3 +805,57 @@ def test_diverged_simple_hands_over_to_the_transient(tmp_path, monkeypatch):
     st = run_case(tmp_path / "n", ranks=1)
     assert st["converged"] is False and "transient" not in st
     assert st["reason"].startswith("simpleFoam (main) diverged") and st["failed_log"].endswith("log.simpleFoam")
+
+
+# ----------------------------------------------------------------- SIMPLE residual plateau
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_residual_plateau_is_steady_and_a_moving_solution_is_not(tmp_path):
+    """SIMPLE stopped by max_iterations above an unreachable residual tolerance (1e-12) on a
+    Poiseuille tube whose solution no longer changes: the plateau check runs 60 more iterations,
+    finds dp, mean |WSS| and U unchanged (< 1e-4) and calls it converged (criterion_used
+    residual_plateau), and the pressure drop is Hagen-Poiseuille's. With a plateau tolerance no
+    solution meets (1e-14) the same run is not converged, with the changes and the reason."""
+    stl = _tube(tmp_path)
+    cfg = deep_merge(
+        POIS_CFG,
+        {
+            "mesh": {"cell_size": 2.0e-3, "layers": 0},
+            "solver": {
+                "tolerance": 1.0e-12,
+                "max_iterations": 400,
+                "plateau": {"iterations": 60, "max_residual": 1.0e-3, "tolerance": 1.0e-4},
+            },
+        },
+    )
+    render_case(tmp_path / "a", stl, cfg, flavour="esi")
+    st = run_case(tmp_path / "a", ranks=1)
+    pl = st["plateau"]
+    assert st["converged"] is True and st["criterion_used"] == "residual_plateau", (st["reason"], pl)
+    assert st["reason"] is None and "residual plateau" in st["criterion"]
+    assert pl["stationary"] and pl["from_iteration"] == "400" and pl["to_iteration"] == "460"
+    assert all(v < 1e-4 for v in pl["changes"].values()), pl
+    assert st["iterations"] == 460 and st["stage_iterations"]["simpleFoam.plateau"] == 60
+    assert "transient" not in st
+    mu = DEFAULTS["physics"]["nu"] * DEFAULTS["physics"]["rho"]
+    dp_k, length, _ = _sections(tmp_path / "a", st)
+    dp_hp = 8 * mu * length * Q_POIS / (np.pi * R**4)
+    assert dp_k * DEFAULTS["physics"]["rho"] == pytest.approx(dp_hp, rel=0.06)
+
+    strict = deep_merge(cfg, {"solver": {"plateau": {"tolerance": 1.0e-14}}})
+    render_case(tmp_path / "b", stl, strict, flavour="esi")
+    st = run_case(tmp_path / "b", ranks=1)
+    pl = st["plateau"]
+    assert st["converged"] is False and st["criterion_used"] == "none"
+    assert pl["stationary"] is False and pl["why"].startswith("still changing:"), pl
+    assert st["reason"].startswith("SIMPLE did not reach initial residuals < 1e-12 in 400 iterations")
+    assert "; plateau check (60 more iterations): still changing: " in st["reason"]
+
+
+def test_plateau_settings_are_checked(tmp_path):
+    for bad in ({"iterations": -1}, {"max_residual": 0}, {"tolerance": 2}):
+        cfg = {"solver": {"plateau": bad}}
+        with pytest.raises(VCSInputError, match=r"cfd\.solver\.plateau\."):
+            render_case(tmp_path / "x", _tube(tmp_path), cfg, flavour="esi")

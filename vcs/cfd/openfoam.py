@@ -91,6 +91,11 @@ DEFAULTS: dict[str, Any] = {
         "p_rel_tol": 0.05,
         "U_solver_tolerance": 1.0e-9,
         "U_rel_tol": 0.1,
+        "plateau": {  # SIMPLE above the tolerance: a steady solution whose residuals level off?
+            "iterations": 100,  # extra SIMPLE iterations compared with the last state (0 = no check)
+            "max_residual": 1.0e-3,  # only when the last initial residuals of p and U are below this
+            "tolerance": 1.0e-4,  # steady: dp, mean |WSS| and U (volume L2) change by less (relative)
+        },
         "fallback": "transient",  # none | transient: if SIMPLE does not converge, run pimpleFoam
         # from the SIMPLE state and report time averages (converged only when stationary)
         "transient": {
@@ -240,6 +245,9 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _number(cfd, "solver.transient.max_co", 0.0, 2.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.plateau.iterations", 0, 100000)
+    _number(cfd, "solver.plateau.max_residual", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.plateau.tolerance", 0.0, 1.0, lo_open=True)
     _number(cfd, "mesh.layers", 0, 20)
     _number(cfd, "mesh.max_boundary_skewness", 0.0, 100.0, lo_open=True)
     _number(cfd, "mesh.jet_refinement.cells_across", 1, 100)
