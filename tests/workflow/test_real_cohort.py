@@ -1,0 +1,89 @@
+"""The five shared real vessels through the whole workflow with the real OpenFOAM (marker
+``openfoam``): the three thoracic aortas (AortaCFD patient1 with its coarctation, VMR 0154, the
+coarse TAH aorta), the SimVascular segment and the vmtk closed segment, with the default
+config/config.yaml and only a patients sheet (config/real_patients.tsv, the repository's own):
+every vessel meshed with its inlet and outlet patches, every one converged at the default
+inflow, an atlas of all five without ``accept_relaxed``. CI-affordable: the sheet's own column
+``cell_size_mm`` gives AortaCFD patient1 a coarser lumen cell than the automatic one (0.59 mm at
+its 4.7 mm coarctation, 79k cells, unsteady: README "Real cohort"); the other four keep
+``auto``. Skipped without ../shared/data. ~6 min on 2 cores."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+
+import pytest
+from conftest import REPO
+
+SHARED = REPO.parent / "shared" / "data"
+HAVE_FOAM = shutil.which("simpleFoam") is not None
+# CI cell size of AortaCFD patient1 [mm] (auto: 0.59 mm); the others: auto
+CI_CELL_MM = {"aortacfd_patient1": "1.0"}
+
+
+def _sheet_rows() -> list[dict]:
+    """config/real_patients.tsv with its ../shared paths made absolute."""
+    lines = [ln for ln in (REPO / "config" / "real_patients.tsv").read_text().splitlines() if not ln.startswith("#")]
+    rows = list(csv.DictReader(lines, delimiter="\t"))
+    for r in rows:
+        for k in ("mesh", "inlet_cap", "outlet_cap"):
+            if r[k]:
+                r[k] = str((REPO / r[k]).resolve())
+        r["cell_size_mm"] = CI_CELL_MM.get(r["id"], "")
+    return rows
+
+
+@pytest.mark.openfoam
+@pytest.mark.skipif(not HAVE_FOAM, reason="OpenFOAM (simpleFoam) not installed; run scripts/install.sh")
+@pytest.mark.skipif(not SHARED.is_dir(), reason=f"real vessel meshes not available ({SHARED} is absent)")
+def test_real_cohort_meshed_converged_and_in_the_atlas(tmp_path, workdir_factory, repo):
+    rows = _sheet_rows()
+    ids = sorted(r["id"] for r in rows)
+    assert len(ids) == 5
+    wd = workdir_factory(tmp_path, rows)
+    cfg = wd.config()
+    assert cfg["atlas"]["accept_relaxed"] is False and cfg["cfd"]["mesh"]["cell_size"] == "auto"
+    r = wd.snakemake("--profile", str(repo / "profiles" / "local"), "--cores", "2", check=False, timeout=3600)
+    res = tmp_path / "results"
+    report = []
+    for pid in ids:
+        st = json.loads((res / "patients" / pid / "status.json").read_text())
+        report.append(
+            f"{pid}: converged {st['converged']} ({st.get('criterion_used')}), {st.get('cells')} cells, "
+            f"{st.get('iterations')} it., reason {st.get('reason')}"
+        )
+    print("\n".join(report))
+    assert r.returncode == 0, "\n".join(report) + "\n" + r.stderr[-3000:]
+
+    for pid in ids:
+        st = json.loads((res / "patients" / pid / "status.json").read_text())
+        assert st["converged"] is True, (pid, st["reason"])
+        assert st["criterion_used"] in ("residualControl", "residual_plateau", "time_average_stationary")
+        mesh = st["mesh"]
+        for role in ("wall", "inlet", "outlet"):
+            assert mesh["patches"][role]["faces"] >= 20, (pid, role, mesh["patches"])
+        assert mesh["background_faces"] == 0
+        assert mesh["sizing"]["cell_size"]["source"] == ("patient" if pid in CI_CELL_MM else "auto")
+        assert st["mass_imbalance"] < 1e-3
+        # the default inflow: 5 L/min scaled by the inlet area over 4.909 cm2 (at most 1)
+        q = st["inflow"]
+        assert q["source"] == "config" and q["scaling"] == "scaled_by_inlet_area"
+        a_in = q["inlet_area_m2"]
+        assert q["flow_rate_m3_s"] == pytest.approx(8.3e-5 * min(a_in / 4.909e-4, 1.0), rel=1e-6)
+        assert -st["flow_rates"]["inlet"] == pytest.approx(q["flow_rate_m3_s"], rel=1e-3)
+        # physiological magnitudes at a mean cardiac output (the issue's hidden-check bounds)
+        assert abs(st["inlet_minus_outlet_pressure"]["Pa"]) < 2000
+        wss = st["wall_shear_stress_Pa"]
+        assert 0.05 < wss["mean"] < 20, (pid, wss)
+        # mean WSS within a factor 0.3-6 of Poiseuille's 4 mu Q / (pi r^3) for the inlet radius
+        mu = 3.37e-6 * 1060.0
+        r_in = math.sqrt(a_in / math.pi)
+        wss_hp = 4 * mu * q["flow_rate_m3_s"] / (math.pi * r_in**3)
+        assert 0.3 < wss["mean"] / wss_hp < 6, (pid, wss["mean"], wss_hp)
+
+    atlas = json.loads((res / "atlas" / "atlas.json").read_text())
+    assert sorted(atlas["patients_included"]) == ids and atlas["patients_excluded"] == []
+    assert (res / "atlas" / "complete.txt").is_file()
