@@ -281,9 +281,10 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     checkMesh, the patch check (:func:`patch_check`: an STL solid lost or under-resolved in
     meshing, or a leak into the background box, stops before the solver with the reason in
     words; so does a failed checkMesh), inlet profile, [decomposePar], simpleFoam start-up (first order)
-    then main stage (residualControl). If SIMPLE does not converge (or diverges: floating point
-    exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
-    written (after a divergence, the start-up's) (adjustable time step at Courant number <=
+    then main stage (residualControl); residuals levelled off below ``solver.plateau.max_residual``:
+    :func:`_plateau_check` (more iterations, steady when nothing changes). If SIMPLE does not
+    converge (or diverges: floating point exception) and ``solver.fallback`` is ``transient``:
+    pimpleFoam from the last SIMPLE state written (after a divergence, the start-up's) (adjustable time step at Courant number <=
     ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
     ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
     wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
@@ -303,7 +304,8 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     -------
     dict
         The status (also ``status.json``): ``converged``, ``criterion``, ``criterion_used``
-        (``residualControl``, ``time_average_stationary`` or ``none``), ``reason``,
+        (``residualControl``, ``residual_plateau``, ``time_average_stationary`` or ``none``),
+        ``plateau`` (the plateau check, when it ran), ``reason``,
         ``iterations`` (SIMPLE), ``final_residuals``, ``cells``, ``lumen_volume_m3``, ``mesh``
         (``sizing``: the cell size and why, the background box, the levels; ``patches``: faces per
         STL solid; ``background_faces``; prism-layer coverage, jet refinement), ``mesh_ok`` and
