@@ -284,8 +284,8 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     then main stage (residualControl); residuals levelled off below ``solver.plateau.max_residual``:
     :func:`_plateau_check` (more iterations, steady when nothing changes). If SIMPLE does not
     converge (or diverges: floating point exception) and ``solver.fallback`` is ``transient``:
-    pimpleFoam from the last SIMPLE state written (after a divergence, the start-up's) (adjustable time step at Courant number <=
-    ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
+    pimpleFoam from the last SIMPLE state written (after a divergence, the start-up's)
+    (adjustable time step at Courant number <= ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
     ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
     wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
     window agree (:func:`stationarity`). [reconstructPar]; wallShearStress. Failures do not
