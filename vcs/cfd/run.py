@@ -280,18 +280,19 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     Steps: blockMesh, snappyHexMesh -overwrite (jet refinement cylinder, wall prism layers),
     checkMesh, the patch check (:func:`patch_check`: an STL solid lost or under-resolved in
     meshing, or a leak into the background box, stops before the solver with the reason in
-    words; so does a failed checkMesh), inlet profile, [decomposePar], simpleFoam start-up (first order)
-    then main stage (residualControl); residuals levelled off below ``solver.plateau.max_residual``:
-    :func:`_plateau_check` (more iterations, steady when nothing changes). If SIMPLE does not
-    converge (or diverges: floating point exception) and ``solver.fallback`` is ``transient``:
-    pimpleFoam from the last SIMPLE state written (after a divergence, the start-up's)
-    (adjustable time step at Courant number <= ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
-    ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
-    wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
-    window agree (:func:`stationarity`). [reconstructPar]; wallShearStress. Failures do not
-    raise: they are reported in the status (``reason``, ``failed_log``); nothing raises for a
-    failed, unreadable or not converged run, with or without the fallback. Solver logs of both
-    families are read (openfoam.org 10 prints ``Time = 12s``, ESI ``Time = 12``).
+    words; so does a failed checkMesh), inlet profile, [decomposePar], simpleFoam start-up
+    (first order) then main stage (residualControl); residuals levelled off below
+    ``solver.plateau.max_residual``: :func:`_plateau_check` (more iterations, steady when
+    nothing changes). If SIMPLE does not converge (or diverges: floating point exception) and
+    ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state written (after a
+    divergence, the start-up's) (adjustable time step at Courant number <= ``max_co``), a
+    wash-out of ``washout_flow_throughs`` then an averaging window of ``flow_throughs``
+    flow-through times (lumen volume / flow rate) with fieldAverage of U, p, wallShearStress and
+    |wallShearStress|; ``converged`` is true only when the two halves of the window agree
+    (:func:`stationarity`). [reconstructPar]; wallShearStress. Failures do not raise: they are
+    reported in the status (``reason``, ``failed_log``); nothing raises for a failed, unreadable
+    or not converged run, with or without the fallback. Solver logs of both families are read
+    (openfoam.org 10 prints ``Time = 12s``, ESI ``Time = 12``).
 
     Parameters
     ----------
