@@ -6,7 +6,7 @@ every vessel meshed with its inlet and outlet patches, every one converged at th
 inflow, an atlas of all five without ``accept_relaxed``. CI-affordable: the sheet's own column
 ``cell_size_mm`` gives AortaCFD patient1 a coarser lumen cell than the automatic one (0.59 mm at
 its 4.7 mm coarctation, 79k cells, unsteady: README "Real cohort"); the other four keep
-``auto``. Skipped without ../shared/data. ~6 min on 2 cores."""
+``auto``. Skipped without ../shared/data. ~8 min on the loaded 2-core machine (load 6-7)."""
 
 from __future__ import annotations
 
@@ -78,11 +78,13 @@ def test_real_cohort_meshed_converged_and_in_the_atlas(tmp_path, workdir_factory
         assert abs(st["inlet_minus_outlet_pressure"]["Pa"]) < 2000
         wss = st["wall_shear_stress_Pa"]
         assert 0.05 < wss["mean"] < 20, (pid, wss)
-        # mean WSS within a factor 0.3-6 of Poiseuille's 4 mu Q / (pi r^3) for the inlet radius
-        mu = 3.37e-6 * 1060.0
-        r_in = math.sqrt(a_in / math.pi)
-        wss_hp = 4 * mu * q["flow_rate_m3_s"] / (math.pi * r_in**3)
-        assert 0.3 < wss["mean"] / wss_hp < 6, (pid, wss["mean"], wss_hp)
+        # mean WSS bracketed by Poiseuille's 4 mu Q / (pi r^3): above it at the inlet radius (the
+        # widest section here), within a factor 4 of it at the narrowest section (curvature and
+        # developing flow raise WSS; measured 0.49-2.2x, patient1's coarctation the lowest)
+        hp = 4 * 3.37e-6 * 1060.0 * q["flow_rate_m3_s"] / math.pi  # / r^3
+        r_narrow = mesh["sizing"]["vessel"]["narrowest_diameter_m"] / 2
+        assert wss["mean"] > hp / math.sqrt(a_in / math.pi) ** 3, (pid, wss)
+        assert 0.25 < wss["mean"] / (hp / r_narrow**3) < 4, (pid, wss["mean"], hp / r_narrow**3)
 
     atlas = json.loads((res / "atlas" / "atlas.json").read_text())
     assert sorted(atlas["patients_included"]) == ids and atlas["patients_excluded"] == []
