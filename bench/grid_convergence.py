@@ -3,13 +3,18 @@
 and the grid convergence index (GCI) of Celik et al. 2008, J. Fluids Eng. 130:078001.
 
     .venv/bin/python bench/grid_convergence.py [-o results/verification] [--fine 1.0e-3]
-                                               [--ratio 1.5] [--ranks 2] [--seed 0]
+                                               [--ratio 1.5] [--ranks 2] [--seed 0] [--layers 0]
 
 Three meshes of the same Eq. 8 wall (demo aorta phantom, seed 0, fitted with the default VCS
 settings), refined systematically: the background cell size is h_fine * ratio^k (k = 2, 1, 0) and
 every other setting (snappy refinement levels, which are relative to the background cell) is the
 same, so all cells shrink by the same ratio. Physics and solver are those of config/config.yaml
-(the default steady 5 L/min parabolic inflow), without the averaging fallback.
+(the default steady 5 L/min parabolic inflow), without the averaging fallback, and without wall
+prism layers by default (``--layers``): snappyHexMesh's layer addition is not geometrically
+similar from grid to grid (coverage and collapse at edges vary), and with the default 3 layers
+the measured triplets were not in the asymptotic range (pressure difference oscillating, apparent
+orders 0.2-7: README, "CFD verification"), so the layered default mesh is judged against the
+extrapolated value of this layer-free study instead.
 
 For each mesh: cells, representative size h = (V / N)^(1/3), pressure difference inlet - outlet
 (Pa), area-weighted mean and 95th percentile of |WSS| on the wall patch (Pa), and the WSS map on
@@ -184,6 +189,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ranks", type=int, default=2, help="MPI ranks per case")
     ap.add_argument("--seed", type=int, default=0, help="demo aorta phantom seed")
     ap.add_argument(
+        "--layers",
+        type=int,
+        default=0,
+        help="wall prism layers on every grid (default 0: snappy's layers are not geometrically similar "
+        "between grids; with the default 3 the triplets were not in the asymptotic range, README)",
+    )
+    ap.add_argument(
         "--workdir",
         type=Path,
         help="keep the cases here (default: a temporary folder); solved cases found there are reused",
@@ -195,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     a.output.mkdir(parents=True, exist_ok=True)
     cfd = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["cfd"]
     cfd["flavour"] = "esi"
+    cfd["mesh"]["layers"] = a.layers
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         work = a.workdir or Path(tmp)
@@ -221,6 +234,7 @@ def main(argv: list[str] | None = None) -> int:
         "reference": "Celik et al. 2008, J. Fluids Eng. 130:078001 (Eqs. 1-10)",
         "vessel": f"demo aorta phantom seed {a.seed} (Eq. 8 wall, 64 around, outlet extension 1 diameter)",
         "inflow": cfd["inlet"],
+        "layers": a.layers,
         "order": "fine, medium, coarse",
         "background_cell_mm": [g["background_cell_mm"] for g in grids],
         "cells": [g["cells"] for g in grids],
