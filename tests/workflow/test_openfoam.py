@@ -749,13 +749,18 @@ def test_jet_transient_too_short_window_is_not_stationary(tmp_path):
 
 @pytest.mark.openfoam
 @needs_foam
-@pytest.mark.parametrize("fake", ["crash", "silent"])
+@pytest.mark.parametrize("fake", ["crash", "silent", "killed"])
 def test_transient_fallback_never_raises(tmp_path, monkeypatch, fake):
-    """A pimpleFoam that fails, or that exits 0 without writing anything: a reason, no exception."""
+    """A pimpleFoam that fails, that exits 0 without writing anything, or that is killed from
+    outside (the OOM killer's SIGKILL): a reason that says which, no exception."""
     bindir = tmp_path / "bin"
     bindir.mkdir()
     script = bindir / "pimpleFoam"
-    body = 'echo "--> FOAM FATAL ERROR: fake solver"; exit 1' if fake == "crash" else "exit 0"
+    body = {
+        "crash": 'echo "--> FOAM FATAL ERROR: fake solver"; exit 1',
+        "silent": "exit 0",
+        "killed": "kill -9 $$",
+    }[fake]
     script.write_text(f"#!/bin/sh\n{body}\n")
     script.chmod(0o755)
     monkeypatch.setenv("PATH", f"{bindir}:{os.environ['PATH']}")
@@ -766,6 +771,8 @@ def test_transient_fallback_never_raises(tmp_path, monkeypatch, fake):
     assert st["criterion_used"] == "none" and st["transient"]["evaluated"] is False
     if fake == "crash":
         assert "pimpleFoam (washout) failed" in st["reason"] and st["failed_log"].endswith("log.pimpleFoam.washout")
+    elif fake == "killed":
+        assert "pimpleFoam (washout) was killed by signal 9 (SIGKILL) from outside the run" in st["reason"]
     else:
         assert "wrote no time folder" in st["reason"]
     assert st["fields"]["time_averaged"] is False

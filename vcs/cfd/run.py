@@ -107,6 +107,13 @@ class _Runner:
             except OSError as exc:  # e.g. the utility is not on PATH: a failed utility, not a crash
                 r = subprocess.CompletedProcess(cmd, returncode=127)
                 fh.write(f"\n--> FOAM FATAL ERROR: vcsflow could not start {cmd[0]}: {exc}\n")
+            else:
+                if r.returncode < 0:  # killed from outside (OOM killer, kill, a scheduler): say by what
+                    try:
+                        name = signal.Signals(-r.returncode).name
+                    except ValueError:
+                        name = "unknown signal"
+                    fh.write(f"\n# vcsflow: killed by signal {-r.returncode} ({name})\n")
         self.timings[log] = round(self.timings.get(log, 0.0) + time.perf_counter() - t0, 3)
         return r
 
@@ -1026,6 +1033,12 @@ def _solver_failure(log: Path, stage: str, solver: str = "simpleFoam") -> str:
         return f"{solver} ({stage}) failed: " + " ".join(m.group(1).split())[:400]
     if "# vcsflow: timeout" in txt:
         return f"{solver} ({stage}) stopped: timeout (cfd.solver.timeout_s; see logs/{log.name})"
+    k = re.search(r"# vcsflow: killed by signal (\d+) \((\w+)\)", txt)
+    if k:
+        return (
+            f"{solver} ({stage}) was killed by signal {k.group(1)} ({k.group(2)}) from outside the run "
+            f"(out of memory, a scheduler's limit, or kill; see logs/{log.name})"
+        )
     return f"{solver} ({stage}) exited with an error (see logs/{log.name})"
 
 
