@@ -819,12 +819,13 @@ def test_diverged_simple_hands_over_to_the_transient(tmp_path, monkeypatch):
 
 @pytest.mark.openfoam
 @needs_foam
-def test_residual_plateau_is_steady_and_a_moving_solution_is_not(tmp_path):
+def test_residual_plateau_is_steady_and_a_too_strict_check_is_not(tmp_path):
     """SIMPLE stopped by max_iterations above an unreachable residual tolerance (1e-12) on a
     Poiseuille tube whose solution no longer changes: the plateau check runs 60 more iterations,
     finds dp, mean |WSS| and U unchanged (< 1e-4) and calls it converged (criterion_used
     residual_plateau), and the pressure drop is Hagen-Poiseuille's. With a plateau tolerance no
-    solution meets (1e-14) the same run is not converged, with the changes and the reason."""
+    solution meets (1e-14) the same run is not converged, with the changes and the reason. (A
+    limit cycle: test_plateau_pressure_change_sees_a_limit_cycle.)"""
     stl = _tube(tmp_path)
     cfg = deep_merge(
         POIS_CFG,
@@ -844,6 +845,7 @@ def test_residual_plateau_is_steady_and_a_moving_solution_is_not(tmp_path):
     assert st["reason"] is None and "residual plateau" in st["criterion"]
     assert pl["stationary"] and pl["from_iteration"] == "400" and pl["to_iteration"] == "460"
     assert all(v < 1e-4 for v in pl["changes"].values()), pl
+    assert pl["max_residual_in_window"] < 1e-3
     assert st["iterations"] == 460 and st["stage_iterations"]["simpleFoam.plateau"] == 60
     assert "transient" not in st
     mu = DEFAULTS["physics"]["nu"] * DEFAULTS["physics"]["rho"]
@@ -861,8 +863,44 @@ def test_residual_plateau_is_steady_and_a_moving_solution_is_not(tmp_path):
     assert "; plateau check (60 more iterations): still changing: " in st["reason"]
 
 
+def test_plateau_pressure_change_sees_a_limit_cycle():
+    """An odd/even 2-cycle of SIMPLE (period dividing the window): equal ends, but the check
+    looks at every iteration of the window."""
+    from vcs.cfd.run import plateau_pressure_change
+
+    cycle = np.array([10.0, 11.0] * 50 + [10.0])  # 101 values, iterations t0..t0+100
+    assert cycle[0] == cycle[-1]
+    assert plateau_pressure_change(cycle, 10.0) == pytest.approx(0.1)
+    assert plateau_pressure_change(np.full(101, 10.0), 10.0) == 0.0
+    drift = 10.0 + 1e-3 * np.arange(101)
+    assert plateau_pressure_change(drift, 10.0) == pytest.approx(0.01)
+
+
+def test_signal_deaths_are_told_apart(tmp_path):
+    """KILL/TERM are deaths from outside (OOM killer, scheduler); SEGV/ABRT the utility's own crash."""
+    from vcs.cfd.run import _solver_failure, _utility_failure
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "log.snappyHexMesh").write_text("Create mesh\n\n# vcsflow: killed by signal 9 (SIGKILL)\n")
+    assert _utility_failure(tmp_path, "snappyHexMesh").startswith(
+        "snappyHexMesh was killed by signal 9 (SIGKILL) from outside the run (out of memory"
+    )
+    (logs / "log.simpleFoam").write_text("Time = 3\n\n# vcsflow: killed by signal 11 (SIGSEGV)\n")
+    assert _solver_failure(logs / "log.simpleFoam", "main") == (
+        "simpleFoam (main) crashed with signal 11 (SIGSEGV) (see logs/log.simpleFoam)"
+    )
+
+
 def test_plateau_settings_are_checked(tmp_path):
-    for bad in ({"iterations": -1}, {"max_residual": 0}, {"tolerance": 2}):
+    for bad in (
+        {"iterations": -1},
+        {"iterations": 5},
+        {"iterations": 50.5},
+        {"max_residual": 0},
+        {"tolerance": 0.5},
+        {"window": 100},
+    ):
         cfg = {"solver": {"plateau": bad}}
-        with pytest.raises(VCSInputError, match=r"cfd\.solver\.plateau\."):
+        with pytest.raises(VCSInputError, match=r"cfd\.solver\.plateau"):
             render_case(tmp_path / "x", _tube(tmp_path), cfg, flavour="esi")

@@ -245,9 +245,20 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _number(cfd, "solver.transient.max_co", 0.0, 2.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)
-    _number(cfd, "solver.plateau.iterations", 0, 100000)
-    _number(cfd, "solver.plateau.max_residual", 0.0, 1.0, lo_open=True)
-    _number(cfd, "solver.plateau.tolerance", 0.0, 1.0, lo_open=True)
+    pl_it = (cfd["solver"].get("plateau") or {}).get("iterations")
+    if not (isinstance(pl_it, int) and not isinstance(pl_it, bool) and (pl_it == 0 or 10 <= pl_it <= 100000)):
+        raise VCSInputError(
+            "cfd.solver.plateau.iterations must be 0 (no plateau check) or a whole number in [10, 100000], "
+            f"not {pl_it!r}"
+        )
+    _number(cfd, "solver.plateau.max_residual", 0.0, 1.0e-2, lo_open=True)
+    _number(cfd, "solver.plateau.tolerance", 0.0, 1.0e-2, lo_open=True)
+    unknown = set(cfd["solver"].get("plateau") or {}) - {"iterations", "max_residual", "tolerance"}
+    if unknown:
+        raise VCSInputError(
+            f"unknown key(s) in cfd.solver.plateau: {', '.join(sorted(unknown))}; "
+            "known: iterations, max_residual, tolerance"
+        )
     _number(cfd, "mesh.layers", 0, 20)
     _number(cfd, "mesh.max_boundary_skewness", 0.0, 100.0, lo_open=True)
     _number(cfd, "mesh.jet_refinement.cells_across", 1, 100)

@@ -601,6 +601,11 @@ def _plateau_check(
         if t1 <= t0:
             info["why"] = "the plateau check wrote no new time folder"
             return out
+        worst = max((max(r.get("p", 1.0), r.get("U", 1.0)) for r in parsed["rows"]), default=float("nan"))
+        info["max_residual_in_window"] = worst
+        if not worst < info["max_residual"]:
+            info["why"] = f"a residual rose to {worst:.3g} (>= {info['max_residual']:g}) during the extra iterations"
+            return out
         if ranks > 1 and run(["reconstructPar", "-time", f"{t0_name},{t1_name}"], "reconstructPar").returncode != 0:
             info["why"] = "reconstructPar failed"
             return out
@@ -618,6 +623,13 @@ def _plateau_check(
         return out
 
 
+def plateau_pressure_change(dp: NDArray[np.floating], scale: float) -> float:
+    """Largest relative departure of the inlet-outlet pressure difference from its first value
+    over the plateau check's iterations: max_i |dp_i - dp_0| / scale (``scale`` > 0)."""
+    dp = np.asarray(dp, dtype=float)
+    return float(np.max(np.abs(dp - dp[0])) / scale) if len(dp) else float("nan")
+
+
 def _state_change(
     case_dir: Path, state: dict[str, Any], t0: float, d0: str, t1: float, d1: str, peak_velocity: float
 ) -> dict[str, float]:
@@ -626,18 +638,17 @@ def _state_change(
     inlets = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
     outlets = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
 
-    def at(name: str, t: float) -> float:
+    def series(name: str) -> dict[int, float]:
         ser = function_series(case_dir, f"pressure_{name}")
-        k = np.flatnonzero(np.abs(ser[:, 0] - t) < 0.5)
-        if not len(k):
-            raise ValueError(f"no patch pressure of {name!r} at iteration {t:g}")
-        return float(ser[k[-1], 1])
+        return {int(round(t)): float(v) for t, v in ser if t0 - 0.5 < t < t1 + 0.5}  # later rows win
 
-    def dp(t: float) -> float:
-        return at(inlets[0], t) - float(np.mean([at(n, t) for n in outlets]))
-
-    dp0, dp1 = dp(t0), dp(t1)
-    dp_scale = max(abs(dp1), 0.1 * 0.5 * peak_velocity**2)
+    s_in = series(inlets[0])
+    s_out = [series(n) for n in outlets]
+    its = [i for i in range(int(round(t0)), int(round(t1)) + 1) if i in s_in and all(i in o for o in s_out)]
+    if not its or its[0] != int(round(t0)) or its[-1] != int(round(t1)):
+        raise ValueError(f"no patch pressures at iterations {t0:g} and {t1:g}")
+    dps = np.array([s_in[i] - float(np.mean([o[i] for o in s_out])) for i in its])
+    dp_scale = max(abs(dps[-1]), 0.1 * 0.5 * peak_velocity**2)
     walls = _wall_faces(case_dir, state)
     area = np.concatenate([a for _, a in walls])
 
@@ -653,7 +664,9 @@ def _state_change(
         raise ValueError(f"U ({u0.shape}, {u1.shape}) and V ({vol.shape}) do not match")
     l2 = float(np.sqrt((vol * ((u1 - u0) ** 2).sum(1)).sum() / max((vol * (u1**2).sum(1)).sum(), 1e-300)))
     return {
-        "inlet_minus_outlet_pressure": abs(dp1 - dp0) / dp_scale,
+        # every iteration of the window, not only its ends: a limit cycle whose period divides the
+        # window would have equal ends
+        "inlet_minus_outlet_pressure": plateau_pressure_change(dps, dp_scale),
         "wss_mean": abs(w1 - w0) / max(abs(w1), 1e-300),
         "U_L2": l2,
     }
@@ -1020,7 +1033,30 @@ def _utility_failure(case_dir: Path, utility: str) -> str:
         detail = ": " + " ".join(" ".join(lines).split())[:300] if lines else ""
     elif "# vcsflow: timeout" in txt:
         detail = ": timeout"
+    else:
+        sig = _signal_reason(txt, log)
+        if sig:
+            return f"{utility} {sig}"
     return f"{utility} failed{detail} (see logs/log.{utility})"
+
+
+# signals that come from outside a process (the OOM killer and kill send KILL; schedulers TERM,
+# XCPU; a closed terminal HUP): any other signal is the utility's own crash
+_OUTSIDE_SIGNALS = ("SIGKILL", "SIGTERM", "SIGINT", "SIGHUP", "SIGXCPU")
+
+
+def _signal_reason(txt: str, log: Path) -> str | None:
+    """``was killed by signal N (NAME) ...`` / ``crashed with signal ...`` when the runner
+    recorded a death by signal in the log (see :class:`_Runner`), else None."""
+    k = re.search(r"# vcsflow: killed by signal (\d+) \(([\w ]+)\)", txt)
+    if not k:
+        return None
+    if k.group(2) in _OUTSIDE_SIGNALS:
+        return (
+            f"was killed by signal {k.group(1)} ({k.group(2)}) from outside the run "
+            f"(out of memory, a scheduler's limit, or kill; see logs/{log.name})"
+        )
+    return f"crashed with signal {k.group(1)} ({k.group(2)}) (see logs/{log.name})"
 
 
 def _solver_failure(log: Path, stage: str, solver: str = "simpleFoam") -> str:
@@ -1033,12 +1069,9 @@ def _solver_failure(log: Path, stage: str, solver: str = "simpleFoam") -> str:
         return f"{solver} ({stage}) failed: " + " ".join(m.group(1).split())[:400]
     if "# vcsflow: timeout" in txt:
         return f"{solver} ({stage}) stopped: timeout (cfd.solver.timeout_s; see logs/{log.name})"
-    k = re.search(r"# vcsflow: killed by signal (\d+) \((\w+)\)", txt)
+    k = _signal_reason(txt, log)
     if k:
-        return (
-            f"{solver} ({stage}) was killed by signal {k.group(1)} ({k.group(2)}) from outside the run "
-            f"(out of memory, a scheduler's limit, or kill; see logs/{log.name})"
-        )
+        return f"{solver} ({stage}) {k}"
     return f"{solver} ({stage}) exited with an error (see logs/{log.name})"
 
 
