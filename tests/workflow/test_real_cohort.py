@@ -20,19 +20,19 @@ from conftest import REPO
 
 SHARED = REPO.parent / "shared" / "data"
 HAVE_FOAM = shutil.which("simpleFoam") is not None
-# CI cell size of AortaCFD patient1 [mm] (auto: 0.59 mm); the others: auto
+# the sheet's own cell sizes: AortaCFD patient1 1.0 mm (auto: 0.59 mm), the others auto
 CI_CELL_MM = {"aortacfd_patient1": "1.0"}
 
 
 def _sheet_rows() -> list[dict]:
-    """config/real_patients.tsv with its ../shared paths made absolute."""
+    """config/real_patients.tsv as it is, its ../shared paths made absolute."""
     lines = [ln for ln in (REPO / "config" / "real_patients.tsv").read_text().splitlines() if not ln.startswith("#")]
     rows = list(csv.DictReader(lines, delimiter="\t"))
     for r in rows:
         for k in ("mesh", "inlet_cap", "outlet_cap"):
             if r[k]:
                 r[k] = str((REPO / r[k]).resolve())
-        r["cell_size_mm"] = CI_CELL_MM.get(r["id"], "")
+    assert {r["id"]: r["cell_size_mm"] for r in rows if r["cell_size_mm"]} == CI_CELL_MM
     return rows
 
 
