@@ -543,11 +543,14 @@ def _plateau_check(
     On real meshes the initial residuals of SIMPLE often level off above 1e-5 (a few distorted
     cells near snapped edges) while the solution no longer changes. When the last residuals are
     below ``cfd.solver.plateau.max_residual``, SIMPLE runs ``plateau.iterations`` more iterations
-    from its last state; the solution is steady (``converged_by`` ``residual_plateau``) when,
-    between the two states, the inlet-outlet pressure difference (relative to max(|dp|, 10 % of
-    the inlet dynamic pressure), as in :func:`stationarity`), the area-mean |WSS| and U
-    (volume-weighted L2 of the change / of U) all change by less than ``plateau.tolerance``. A
-    flow that keeps changing (a jet, vortex shedding) fails the test and goes to the fallback.
+    from its last state; the solution is steady (``converged_by`` ``residual_plateau``) when the
+    residuals stay below ``max_residual`` over those iterations, the inlet-outlet pressure
+    difference departs from its first value by less than ``plateau.tolerance`` at every one of
+    them (relative to max(|dp|, 10 % of the inlet dynamic pressure), as in :func:`stationarity`;
+    every iteration, so a limit cycle whose period divides the window cannot pass), and the
+    area-mean |WSS| and U (volume-weighted L2 of the change / of U) differ between the two states
+    by less than ``plateau.tolerance``. A flow that keeps changing (a jet, vortex shedding) fails
+    the test and goes to the fallback.
     Fills ``status["plateau"]``; never raises (a failure is recorded as ``why``).
 
     Returns
