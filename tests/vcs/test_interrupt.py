@@ -18,6 +18,10 @@ from vcs.cfd.run import _Runner
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _alive(pid: int) -> bool:
     """True while ``pid`` runs (a zombie waiting for its reaper counts as gone)."""
     try:
@@ -77,7 +81,9 @@ def test_signal_to_a_workflow_job_stops_its_solver(tmp_path, sig):
         """
     )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen([sys.executable, "-c", script], env=env)
+    # SIGINT at its default in the child even when this test runs in a background job (where the
+    # shell set it to ignored, and Python would then install no KeyboardInterrupt handler)
+    proc = subprocess.Popen([sys.executable, "-c", script], env=env, preexec_fn=_default_sigint)
     rank = _wait_for(tmp_path / "rank.pid")
     proc.send_signal(sig)
     assert proc.wait(timeout=30) == 130
