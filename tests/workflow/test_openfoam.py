@@ -890,6 +890,16 @@ def test_signal_deaths_are_told_apart(tmp_path):
     assert _solver_failure(logs / "log.simpleFoam", "main") == (
         "simpleFoam (main) crashed with signal 11 (SIGSEGV) (see logs/log.simpleFoam)"
     )
+    # every OpenFOAM banner mentions floating point exceptions: a kill early in the run (a short
+    # log, banner included) is a kill, not a divergence; the sigFpe handler's trace is one
+    banner = "trapFpe: Floating point exception trapping enabled (FOAM_SIGFPE).\nsigFpe : Enabling floating point\n"
+    (logs / "log.simpleFoam").write_text(banner + "Time = 1\n\n# vcsflow: killed by signal 9 (SIGKILL)\n")
+    assert "was killed by signal 9 (SIGKILL)" in _solver_failure(logs / "log.simpleFoam", "main")
+    (logs / "log.simpleFoam").write_text(banner + "Time = 1\n\n# vcsflow: killed by signal 15 (SIGTERM)\n")
+    assert "was killed by signal 15 (SIGTERM)" in _solver_failure(logs / "log.simpleFoam", "main")
+    trace = "#0  Foam::error::printStack(Foam::Ostream&)\n#1  Foam::sigFpe::sigHandler(int)\n"
+    (logs / "log.simpleFoam").write_text(banner + "Time = 9\n" + trace + "\n# vcsflow: killed by signal 8 (SIGFPE)\n")
+    assert _solver_failure(logs / "log.simpleFoam", "main").startswith("simpleFoam (main) diverged: floating point")
 
 
 def test_plateau_settings_are_checked(tmp_path):
@@ -897,6 +907,7 @@ def test_plateau_settings_are_checked(tmp_path):
         {"iterations": -1},
         {"iterations": 5},
         {"iterations": 50.5},
+        {"iterations": True},
         {"max_residual": 0},
         {"tolerance": 0.5},
         {"window": 100},

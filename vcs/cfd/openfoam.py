@@ -15,6 +15,7 @@ incompressibleFluid``) are detected as ``"org11"``, ``"org12"``, ... and not sup
 from __future__ import annotations
 
 import copy
+import math
 import os
 import re
 import shutil
@@ -246,7 +247,8 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)
     pl_it = (cfd["solver"].get("plateau") or {}).get("iterations")
-    if not (isinstance(pl_it, int) and not isinstance(pl_it, bool) and (pl_it == 0 or 10 <= pl_it <= 100000)):
+    n_it = float(pl_it) if isinstance(pl_it, (int, float)) and not isinstance(pl_it, bool) else math.nan
+    if not (n_it.is_integer() and (n_it == 0 or 10 <= n_it <= 100000)):
         raise VCSInputError(
             "cfd.solver.plateau.iterations must be 0 (no plateau check) or a whole number in [10, 100000], "
             f"not {pl_it!r}"

@@ -511,9 +511,10 @@ def _criterion_text(sol: dict[str, Any]) -> str:
     pl = sol.get("plateau") or {}
     if int(pl.get("iterations", 0)) > 0:
         txt += (
-            f"; or a residual plateau: residuals < {pl['max_residual']:g} and, over {int(pl['iterations'])} more "
-            f"SIMPLE iterations, the inlet-outlet pressure difference, mean |WSS| and U (volume L2) change by "
-            f"< {100 * pl['tolerance']:g} %"
+            f"; or a residual plateau: residuals < {pl['max_residual']:g} throughout {int(pl['iterations'])} more "
+            f"SIMPLE iterations, the inlet-outlet pressure difference within {100 * pl['tolerance']:g} % of its "
+            f"first value at every one of them, and mean |WSS| and U (volume L2) changed by < "
+            f"{100 * pl['tolerance']:g} %"
         )
     if sol.get("fallback") == "transient":
         tr = sol["transient"]
@@ -643,13 +644,13 @@ def _state_change(
 
     def series(name: str) -> dict[int, float]:
         ser = function_series(case_dir, f"pressure_{name}")
-        return {int(round(t)): float(v) for t, v in ser if t0 - 0.5 < t < t1 + 0.5}  # later rows win
+        return {int(round(t)): float(v) for t, v in ser if t0 - 0.5 < t < t1 + 0.5}
 
     s_in = series(inlets[0])
     s_out = [series(n) for n in outlets]
     its = [i for i in range(int(round(t0)), int(round(t1)) + 1) if i in s_in and all(i in o for o in s_out)]
-    if not its or its[0] != int(round(t0)) or its[-1] != int(round(t1)):
-        raise ValueError(f"no patch pressures at iterations {t0:g} and {t1:g}")
+    if len(its) != int(round(t1)) - int(round(t0)) + 1:
+        raise ValueError(f"patch pressures missing at some iterations from {t0:g} to {t1:g}")
     dps = np.array([s_in[i] - float(np.mean([o[i] for o in s_out])) for i in its])
     dp_scale = max(abs(dps[-1]), 0.1 * 0.5 * peak_velocity**2)
     walls = _wall_faces(case_dir, state)
@@ -1066,15 +1067,22 @@ def _solver_failure(log: Path, stage: str, solver: str = "simpleFoam") -> str:
     """One-line reason for a failed solver stage from the end of its log."""
     txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
     m = re.search(r"(FOAM FATAL[^\n]*\n(?:[^\n]*\n){0,6})", txt)
-    if "Floating point exception" in txt or "sigFpe" in txt:
+    # a divergence: OpenFOAM's sigFpe handler's stack trace, the shell's "Floating point exception"
+    # at the start of a line, or death by SIGFPE; NOT the banner's "trapFpe: Floating point
+    # exception trapping enabled" (or the older "sigFpe : Enabling ..."), which every log has
+    if (
+        "sigFpe::sigHandler" in txt
+        or re.search(r"^Floating point exception", txt, re.M)
+        or "# vcsflow: killed by signal 8 (SIGFPE)" in txt
+    ):
         return f"{solver} ({stage}) diverged: floating point exception (see logs/{log.name})"
-    if m:
-        return f"{solver} ({stage}) failed: " + " ".join(m.group(1).split())[:400]
     if "# vcsflow: timeout" in txt:
         return f"{solver} ({stage}) stopped: timeout (cfd.solver.timeout_s; see logs/{log.name})"
     k = _signal_reason(txt, log)
     if k:
         return f"{solver} ({stage}) {k}"
+    if m:
+        return f"{solver} ({stage}) failed: " + " ".join(m.group(1).split())[:400]
     return f"{solver} ({stage}) exited with an error (see logs/{log.name})"
 
 
