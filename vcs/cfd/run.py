@@ -605,7 +605,7 @@ def _plateau_check(
         if t1 <= t0:
             info["why"] = "the plateau check wrote no new time folder"
             return out
-        worst = max((max(r.get("p", 1.0), r.get("U", 1.0)) for r in parsed["rows"]), default=float("nan"))
+        worst = max((max(row.get("p", 1.0), row.get("U", 1.0)) for row in parsed["rows"]), default=float("nan"))
         info["max_residual_in_window"] = worst
         if not worst < info["max_residual"]:
             info["why"] = f"a residual rose to {worst:.3g} (>= {info['max_residual']:g}) during the extra iterations"
