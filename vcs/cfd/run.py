@@ -627,6 +627,12 @@ def _plateau_check(
         return out
 
 
+def volume_l2_ratio(vol: NDArray[np.floating], diff: NDArray[np.floating], ref: NDArray[np.floating]) -> float:
+    """Volume-weighted L2 norm of a change of a vector field relative to that of the field:
+    sqrt(sum V |diff|^2 / sum V |ref|^2) (the U criterion of the plateau and stationarity tests)."""
+    return float(np.sqrt((vol * (diff**2).sum(1)).sum() / max((vol * (ref**2).sum(1)).sum(), 1e-300)))
+
+
 def plateau_pressure_change(dp: NDArray[np.floating], scale: float) -> float:
     """Largest relative departure of the inlet-outlet pressure difference from its first value
     over the plateau check's iterations: max_i |dp_i - dp_0| / scale (``scale`` > 0)."""
@@ -666,7 +672,7 @@ def _state_change(
     u1 = read_internal_field(case_dir / d1 / "U", len(vol))
     if u0.shape != u1.shape or len(u1) != len(vol):
         raise ValueError(f"U ({u0.shape}, {u1.shape}) and V ({vol.shape}) do not match")
-    l2 = float(np.sqrt((vol * ((u1 - u0) ** 2).sum(1)).sum() / max((vol * (u1**2).sum(1)).sum(), 1e-300)))
+    l2 = volume_l2_ratio(vol, u1 - u0, u1)
     return {
         # every iteration of the window, not only its ends: a limit cycle whose period divides the
         # window would have equal ends
@@ -952,7 +958,7 @@ def stationarity(
     if u1.shape != uw.shape or len(uw) != len(vol):
         raise ValueError(f"UMean ({u1.shape}, {uw.shape}) and V ({vol.shape}) do not match")
     u2 = 2.0 * uw - u1
-    l2 = float(np.sqrt((vol * ((u2 - u1) ** 2).sum(1)).sum() / max((vol * (uw**2).sum(1)).sum(), 1e-300)))
+    l2 = volume_l2_ratio(vol, u2 - u1, uw)
     diffs = {
         "inlet_minus_outlet_pressure": abs(dp2 - dp1) / dp_scale,
         "tawss_mean": abs(tm2 - tm1) / max(abs(tmw), 1e-300),
