@@ -1,0 +1,108 @@
+#!/usr/bin/env python3
+"""The README's real-cohort table: config/real_patients.tsv (the five shared real vessels) through
+the whole workflow with the default config/config.yaml, then one row per patient from its
+status.json and the workflow's own benchmark files.
+
+    .venv/bin/python bench/real_cohort.py [-d DIR] [--cores 2]
+
+Needs ../shared/data beside the repository and OpenFOAM. DIR (default: a temporary folder) is the
+Snakemake working directory; a finished DIR is only re-read. Prints, per patient: cell size (and
+what set it), cells, wall / inlet / outlet faces, layer coverage, SIMPLE iterations and the
+convergence criterion, final residuals, inlet - outlet pressure, WSS mean / max, inflow, time per
+patient (the five workflow jobs, wall clock) and OpenFOAM solver seconds; then the whole run's wall
+time and the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import date
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+JOBS = ("vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample")
+
+
+def sheet(dst: Path) -> list[str]:
+    """config/real_patients.tsv with its ../shared paths made absolute, written to ``dst``."""
+    lines = [ln for ln in (REPO / "config" / "real_patients.tsv").read_text().splitlines() if not ln.startswith("#")]
+    rows = list(csv.DictReader(lines, delimiter="\t"))
+    for r in rows:
+        for k in ("mesh", "inlet_cap", "outlet_cap"):
+            if r[k]:
+                r[k] = str((REPO / r[k]).resolve())
+    with open(dst, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]), delimiter="\t", lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+    return [r["id"] for r in rows]
+
+
+def row(res: Path, pid: str) -> str:
+    st = json.loads((res / "patients" / pid / "status.json").read_text())
+    m, t = st["mesh"], st["timings_s"]
+    size = m["sizing"]["cell_size"]
+    job_s = sum(
+        float(next(csv.DictReader(open(res / "benchmarks" / j / f"{pid}.tsv"), delimiter="\t"))["s"]) for j in JOBS
+    )
+    solver_s = sum(v for k, v in t.items() if k.startswith(("simpleFoam", "pimpleFoam")))
+    fr, wss = st["final_residuals"], st["wall_shear_stress_Pa"]
+    faces = " / ".join(f"{m['patches'][k]['faces']:,}" for k in ("wall", "inlet", "outlet"))
+    return (
+        f"| {pid} | {size['cell_size_m'] * 1e3:.3g} ({size['governed_by']}) | {st['cells']:,} | {faces} | "
+        f"{m['layers'].get('coverage', 0):.2f} | {st['iterations']:,} ({st['criterion_used']}) | "
+        f"{fr['p']:.2g} / {fr['U']:.2g} | {st['inlet_minus_outlet_pressure']['Pa']:.1f} | "
+        f"{wss['mean']:.3g} / {wss['max']:.3g} | {st['inflow']['flow_rate_l_min']:.3g} | "
+        f"{job_s:.0f} ({solver_s:.0f}) | {'yes' if st['converged'] else 'NO: ' + str(st['reason'])} |"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    ap.add_argument("-d", "--workdir", type=Path, help="Snakemake working directory (default: temporary)")
+    ap.add_argument("--cores", type=int, default=2, help="cores for Snakemake (default 2)")
+    a = ap.parse_args(argv)
+    if not (REPO.parent / "shared" / "data").is_dir():
+        print(f"real_cohort: error: {REPO.parent / 'shared' / 'data'} is absent", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory() as tmp:
+        wd = (a.workdir or Path(tmp)).resolve()
+        wd.mkdir(parents=True, exist_ok=True)
+        ids = sheet(wd / "patients.tsv")
+        cmd = [
+            str(Path(sys.executable).parent / "snakemake"),
+            *("-s", str(REPO / "Snakefile"), "-d", str(wd), "--configfile", str(REPO / "config" / "config.yaml")),
+            *("--config", "patients=patients.tsv", "--profile", str(REPO / "profiles" / "local")),
+            *("--cores", str(a.cores)),
+        ]
+        t0 = time.perf_counter()
+        r = subprocess.run(cmd, cwd=wd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        res = wd / "results"
+        print(
+            f"real cohort, default config, {date.today()}, {platform.node()} ({os.cpu_count()} cores), "
+            f"load {os.getloadavg()[0]:.1f}: snakemake exit {r.returncode}, {wall:.0f} s wall"
+        )
+        print(
+            "| vessel | cell mm (set by) | cells | wall / inlet / outlet faces | layer coverage | SIMPLE iterations "
+            "(criterion) | final residuals p / U | inlet - outlet pressure Pa | WSS mean / max Pa | inflow L/min "
+            "| time per patient s (solver s) | converged |"
+        )
+        print("|---" * 12 + "|")
+        for pid in ids:
+            print(row(res, pid))
+        atlas = json.loads((res / "atlas" / "atlas.json").read_text())
+        print(f"atlas: {len(atlas['patients_included'])} included, {len(atlas['patients_excluded'])} excluded")
+    return 0 if r.returncode == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
