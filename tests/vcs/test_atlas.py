@@ -196,9 +196,19 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
     }
     statuses = {pid: {"converged": True} for pid in models}
     statuses["P5"] = {"converged": False, "reason": "max iterations"}
+    fields["P1"]["field_source"] = np.str_("time_average")  # as fields.npz of a transient fallback
+    fields["P2"]["field_source"] = np.str_("instantaneous")
     atlas = build_atlas(models, fields, statuses, tmp_path, n_modes=2)
     s = json.loads((tmp_path / "atlas.json").read_text())
     assert s["patients_included"] == ["P0", "P1", "P2", "P3", "P4"]
+    # which flows are time averages (P0's fields predate field_source: a steady state)
+    assert s["field_sources"] == {
+        "P0": "instantaneous",
+        "P1": "time_average",
+        "P2": "instantaneous",
+        "P3": "instantaneous",
+        "P4": "instantaneous",
+    }
     assert s["patients_excluded"][0]["id"] == "P5" and "not converged" in s["patients_excluded"][0]["reason"]
     assert len(s["shape_explained_variance"]) == 2
     assert set(s["flow_explained_variance"]) == {"U", "p", "WSS"}

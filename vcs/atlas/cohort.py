@@ -206,6 +206,9 @@ class Atlas:
         The options the atlas was computed with.
     alignment_mean : (n_tau_align * n_theta_align, 3) float, mm
         GPA mean wall grid, the target a new vessel is aligned to.
+    field_sources : dict
+        {included patient id: ``time_average`` (the transient fallback's window means) or
+        ``instantaneous`` (a converged steady state)}, from each patient's fields ``field_source``.
     """
 
     patients: list[str]
@@ -221,6 +224,7 @@ class Atlas:
     options: dict[str, Any]
     alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
     exclusion_stages: dict[str, str] = field(default_factory=dict)  # excluded id -> stage
+    field_sources: dict[str, str] = field(default_factory=dict)  # included id -> time_average | instantaneous
 
 
 def compute_atlas(
@@ -368,6 +372,7 @@ def compute_atlas(
         },
         gpa_mean,
         stages,
+        {p: str(np.asarray(fields[p].get("field_source", "instantaneous"))) for p in patients},
     )
 
 
@@ -428,7 +433,8 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
     Returns
     -------
     dict
-        JSON-ready: patients included/excluded (with reasons), options, alignment (with each
+        JSON-ready: patients included/excluded (with reasons), options, ``field_sources`` (which
+        included patients' flow is a time average, which a steady state), alignment (with each
         patient's transform), explained variances, sigmas and scores of the shape and flow PCAs,
         and the leave-one-out R^2 of the shape -> flow regression (null where undefined) with its
         ``status`` (``insufficient_patients`` when leave-one-out cannot say anything) and the
@@ -441,6 +447,7 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
             {"id": p, "stage": atlas.exclusion_stages.get(p, "solve"), "reason": r} for p, r in atlas.excluded.items()
         ],
         "options": atlas.options,
+        "field_sources": atlas.field_sources,
         "knots": atlas.alignment_report.get("knots"),
         "alignment": {
             **atlas.alignment_report,
