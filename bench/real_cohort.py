@@ -46,13 +46,18 @@ def sheet(dst: Path) -> list[str]:
     return [r["id"] for r in rows]
 
 
+def job_seconds(res: Path, pid: str) -> float:
+    """Wall seconds of one patient's workflow jobs (:data:`JOBS`), from Snakemake's benchmark files."""
+    return sum(
+        float(next(csv.DictReader(open(res / "benchmarks" / j / f"{pid}.tsv"), delimiter="\t"))["s"]) for j in JOBS
+    )
+
+
 def row(res: Path, pid: str) -> str:
     st = json.loads((res / "patients" / pid / "status.json").read_text())
     m, t = st["mesh"], st["timings_s"]
     size = m["sizing"]["cell_size"]
-    job_s = sum(
-        float(next(csv.DictReader(open(res / "benchmarks" / j / f"{pid}.tsv"), delimiter="\t"))["s"]) for j in JOBS
-    )
+    job_s = job_seconds(res, pid)
     solver_s = sum(v for k, v in t.items() if k.startswith(("simpleFoam", "pimpleFoam")))
     fr, wss = st["final_residuals"], st["wall_shear_stress_Pa"]
     faces = " / ".join(f"{m['patches'][k]['faces']:,}" for k in ("wall", "inlet", "outlet"))

@@ -1,0 +1,108 @@
+#!/usr/bin/env python3
+"""The README's jet-atlas table: config/paper.yaml + config/paper_atlas.yaml (the paper's jet,
+steady SIMPLE then the transient time average over 10 flow-through times, on three demo aortas)
+through the whole workflow, then one row per patient from its status.json and the workflow's
+benchmark files, and the atlas's field sources and explained variances.
+
+    .venv/bin/python bench/jet_atlas.py [-d DIR] [--cores 2]
+
+Needs OpenFOAM; ~2-3 hours on 2 cores (README, "An atlas of jet patients"). DIR (default: a
+temporary folder) is the Snakemake working directory; a finished DIR is only re-read. Prints, per
+patient: cells, jet cells across, layer coverage, SIMPLE iterations, flow-through time, wash-out +
+window, pimpleFoam time steps and their size, the half-window differences of the stationarity
+test, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers, the
+patient's wall time (the five workflow jobs) and the verdict; then the atlas.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import date
+from pathlib import Path
+
+from real_cohort import job_seconds  # bench/ is on sys.path when this runs as a script
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = ("config.yaml", "paper.yaml", "paper_atlas.yaml")
+
+
+def row(res: Path, pid: str) -> str:
+    st = json.loads((res / "patients" / pid / "status.json").read_text())
+    m, tr = st["mesh"], st.get("transient") or {}
+    job_s = job_seconds(res, pid)
+    cpu_h = sum(v for k, v in st["timings_s"].items() if k.startswith(("simpleFoam", "pimpleFoam"))) / 3600
+    jet = m.get("jet_refinement") or {}
+    d = tr.get("half_window_differences") or {}
+    halves = " / ".join(f"{100 * d[k]:.2g}" for k in ("inlet_minus_outlet_pressure", "tawss_mean", "U_L2") if k in d)
+    steps = tr.get("time_steps") or {}
+    dt = tr.get("delta_t_s") or {}
+    tawss, osi = st.get("tawss_Pa") or {}, st.get("osi") or {}
+    window = "-"
+    if "window_s" in tr:
+        window = f"{tr['washout_s']:.3g} + {tr['window_s']:.3g} ({tr['window_flow_throughs']:.3g} FT)"
+    return (
+        f"| {pid} | {st['cells']:,} | {jet.get('cells_across', float('nan')):.1f} | "
+        f"{m['layers'].get('coverage', 0):.2f} | {st['iterations']:,} | {tr.get('flow_through_time_s', 0):.3g} | "
+        f"{window} | {sum(steps.values()):,} | {1e3 * dt.get('min', 0):.2g}-{1e3 * dt.get('max', 0):.2g} | "
+        f"{halves or '-'} | {st['inlet_minus_outlet_pressure']['Pa']:.1f} | "
+        f"{tawss.get('mean', float('nan')):.3g} / {tawss.get('max', float('nan')):.3g} | "
+        f"{osi.get('mean', float('nan')):.2g} | {cpu_h:.2f} | {job_s / 60:.0f} | "
+        f"{st['criterion_used'] if st['converged'] else 'NO: ' + str(st['reason'])} |"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    ap.add_argument("-d", "--workdir", type=Path, help="Snakemake working directory (default: temporary)")
+    ap.add_argument("--cores", type=int, default=2, help="cores for Snakemake (default 2)")
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        wd = (a.workdir or Path(tmp)).resolve()
+        wd.mkdir(parents=True, exist_ok=True)
+        sheet = REPO / "config" / "paper_atlas_patients.tsv"
+        ids = [r["id"] for r in csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t")]
+        cmd = [
+            str(Path(sys.executable).parent / "snakemake"),
+            *("-s", str(REPO / "Snakefile"), "-d", str(wd), "--configfile"),
+            *(str(REPO / "config" / c) for c in CONFIGS),
+            *("--config", f"patients={sheet}", "--profile", str(REPO / "profiles" / "local")),
+            *("--cores", str(a.cores)),
+        ]
+        t0 = time.perf_counter()
+        r = subprocess.run(cmd, cwd=wd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        res = wd / "results"
+        print(
+            f"jet atlas, {' + '.join(CONFIGS)}, {date.today()}, {platform.node()} ({os.cpu_count()} cores), "
+            f"load {os.getloadavg()[0]:.1f}: snakemake exit {r.returncode}, {wall:.0f} s wall"
+        )
+        print(
+            "| patient | cells | jet cells across | layer coverage | SIMPLE iterations | flow-through s "
+            "| wash-out + window s | time steps | dt ms | half-window differences % (dp / TAWSS / U) "
+            "| inlet - outlet pressure Pa | TAWSS mean / max Pa | OSI mean | solver CPU h | patient wall min "
+            "| converged |"
+        )
+        print("|---" * 16 + "|")
+        for pid in ids:
+            print(row(res, pid))
+        atlas = json.loads((res / "atlas" / "atlas.json").read_text())
+        ev = {f: ", ".join(f"{100 * v:.0f}" for v in x) for f, x in atlas["flow_explained_variance"].items()}
+        print(
+            f"atlas: {len(atlas['patients_included'])} included, {len(atlas['patients_excluded'])} excluded; "
+            f"field sources {atlas.get('field_sources')}; explained variance % shape "
+            f"{', '.join(f'{100 * v:.0f}' for v in atlas['shape_explained_variance'])}; "
+            + "; ".join(f"{f} {v}" for f, v in ev.items())
+        )
+    return 0 if r.returncode == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
