@@ -10,8 +10,9 @@ Needs OpenFOAM; ~2-3 hours on 2 cores (README, "An atlas of jet patients"). DIR 
 temporary folder) is the Snakemake working directory; a finished DIR is only re-read. Prints, per
 patient: cells, jet cells across, layer coverage, SIMPLE iterations, flow-through time, wash-out +
 window, pimpleFoam time steps and their size, the half-window differences of the stationarity
-test, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers, the
-patient's wall time (the five workflow jobs) and the verdict; then the atlas.
+test, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers (their
+logs' ExecutionTime), the patient's wall time (the five workflow jobs) and the verdict; then the
+atlas. A patient that failed gets '-' where it has no figure and its reason.
 """
 
 from __future__ import annotations
@@ -34,28 +35,55 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIGS = ("config.yaml", "paper.yaml", "paper_atlas.yaml")
 
 
+def solver_cpu_s(case: Path) -> float:
+    """CPU seconds of the case's solvers: the last ExecutionTime of every simpleFoam / pimpleFoam log."""
+    total = 0.0
+    for log in sorted((case / "logs").glob("log.*Foam*")):
+        if log.name.split(".")[1] not in ("simpleFoam", "pimpleFoam"):
+            continue
+        last = None
+        with open(log, errors="replace") as fh:
+            for line in fh:
+                if line.startswith("ExecutionTime = "):
+                    last = line
+        total += float(last.split()[2]) if last else 0.0
+    return total
+
+
 def row(res: Path, pid: str) -> str:
-    st = json.loads((res / "patients" / pid / "status.json").read_text())
-    m, tr = st["mesh"], st.get("transient") or {}
-    job_s = job_seconds(res, pid)
-    cpu_h = sum(v for k, v in st["timings_s"].items() if k.startswith(("simpleFoam", "pimpleFoam"))) / 3600
+    """One table row from the patient's status.json, logs and benchmark files ('-' where absent)."""
+    f = res / "patients" / pid / "status.json"
+    if not f.exists():
+        return f"| {pid} | no status.json (the run stopped before the solver) |"
+    st = json.loads(f.read_text())
+    m, tr = st.get("mesh") or {}, st.get("transient") or {}
+    try:
+        wall_min = f"{job_seconds(res, pid) / 60:.0f}"
+    except (OSError, StopIteration, KeyError, ValueError):
+        wall_min = "-"
+    cpu_h = solver_cpu_s(res / "patients" / pid / "case") / 3600
     jet = m.get("jet_refinement") or {}
     d = tr.get("half_window_differences") or {}
     halves = " / ".join(f"{100 * d[k]:.2g}" for k in ("inlet_minus_outlet_pressure", "tawss_mean", "U_L2") if k in d)
     steps = tr.get("time_steps") or {}
     dt = tr.get("delta_t_s") or {}
     tawss, osi = st.get("tawss_Pa") or {}, st.get("osi") or {}
+    dp = (st.get("inlet_minus_outlet_pressure") or {}).get("Pa")
     window = "-"
     if "window_s" in tr:
         window = f"{tr['washout_s']:.3g} + {tr['window_s']:.3g} ({tr['window_flow_throughs']:.3g} FT)"
+
+    def num(v: object, fmt: str) -> str:
+        return "-" if not isinstance(v, (int, float)) else format(v, fmt)
+
+    dts = "-" if dt.get("min") is None else f"{1e3 * dt['min']:.2g}-{1e3 * dt['max']:.2g}"
     return (
-        f"| {pid} | {st['cells']:,} | {jet.get('cells_across', float('nan')):.1f} | "
-        f"{m['layers'].get('coverage', 0):.2f} | {st['iterations']:,} | {tr.get('flow_through_time_s', 0):.3g} | "
-        f"{window} | {sum(steps.values()):,} | {1e3 * dt.get('min', 0):.2g}-{1e3 * dt.get('max', 0):.2g} | "
-        f"{halves or '-'} | {st['inlet_minus_outlet_pressure']['Pa']:.1f} | "
-        f"{tawss.get('mean', float('nan')):.3g} / {tawss.get('max', float('nan')):.3g} | "
-        f"{osi.get('mean', float('nan')):.2g} | {cpu_h:.2f} | {job_s / 60:.0f} | "
-        f"{st['criterion_used'] if st['converged'] else 'NO: ' + str(st['reason'])} |"
+        f"| {pid} | {num(st.get('cells'), ',')} | {num(jet.get('cells_across'), '.1f')} | "
+        f"{num((m.get('layers') or {}).get('coverage'), '.2f')} | {num(st.get('iterations'), ',')} | "
+        f"{num(tr.get('flow_through_time_s'), '.3g')} | {window} | {num(sum(steps.values()), ',')} | {dts} | "
+        f"{halves or '-'} | {num(dp, '.1f')} | {num(tawss.get('mean'), '.3g')} / {num(tawss.get('max'), '.3g')} | "
+        f"{num(osi.get('mean'), '.2g')} | {cpu_h:.2f} | {wall_min} | "
+        f"{st.get('criterion_used') if st.get('converged') else 'NO: ' + str(st.get('reason'))} |"
     )
 
 
@@ -93,6 +121,9 @@ def main(argv: list[str] | None = None) -> int:
         print("|---" * 16 + "|")
         for pid in ids:
             print(row(res, pid))
+        if not (res / "atlas" / "atlas.json").exists():
+            print("atlas: none (fewer than 3 patients included: see the rows above, results/logs/atlas_build/)")
+            return 1
         atlas = json.loads((res / "atlas" / "atlas.json").read_text())
         ev = {f: ", ".join(f"{100 * v:.0f}" for v in x) for f, x in atlas["flow_explained_variance"].items()}
         print(

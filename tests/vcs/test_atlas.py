@@ -198,7 +198,9 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
     statuses["P5"] = {"converged": False, "reason": "max iterations"}
     fields["P1"]["field_source"] = np.str_("time_average")  # as fields.npz of a transient fallback
     fields["P2"]["field_source"] = np.str_("instantaneous")
-    atlas = build_atlas(models, fields, statuses, tmp_path, n_modes=2)
+    fields["P3"]["field_source"] = np.str_("instantaneous")
+    statuses["P3"] = {"converged": False, "converged_relaxed": True}  # legacy SIMPLE-iterate average
+    atlas = build_atlas(models, fields, statuses, tmp_path, n_modes=2, accept_relaxed=True)
     s = json.loads((tmp_path / "atlas.json").read_text())
     assert s["patients_included"] == ["P0", "P1", "P2", "P3", "P4"]
     # which flows are time averages (P0's fields predate field_source: a steady state)
@@ -206,7 +208,7 @@ def test_build_atlas_writes_summary_and_excludes_failed(tmp_path):
         "P0": "instantaneous",
         "P1": "time_average",
         "P2": "instantaneous",
-        "P3": "instantaneous",
+        "P3": "simple_iterate_average",  # admitted by accept_relaxed, and labelled so
         "P4": "instantaneous",
     }
     assert s["patients_excluded"][0]["id"] == "P5" and "not converged" in s["patients_excluded"][0]["reason"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 
 import numpy as np
 import pytest
@@ -88,3 +89,10 @@ def test_atlas_of_jet_patients_from_time_averages(tmp_path, workdir_factory, rep
     assert atlas["patients_included"] == [f"demo_aorta_{s}" for s in SEEDS] and atlas["patients_excluded"] == []
     assert atlas["field_sources"] == {f"demo_aorta_{s}": "time_average" for s in SEEDS}
     assert set(atlas["flow_explained_variance"]) == {"U", "p", "WSS"}
+    # the README's table (bench/jet_atlas.py) reads every figure it prints from these results
+    sys.path.insert(0, str(REPO / "bench"))
+    from jet_atlas import row
+
+    for s in SEEDS:
+        line = row(res, f"demo_aorta_{s}")
+        assert line.endswith("| time_average_stationary |") and " - " not in line and "nan" not in line, line

@@ -550,6 +550,35 @@ def test_paper_config_is_the_papers_jet(tmp_path):
     assert state["flow_rate"] == pytest.approx(1.2e-4) and state["jet_region"]["cells_across"] >= 10
 
 
+def test_paper_atlas_config_keeps_the_jet_at_level_1(tmp_path):
+    """config/paper_atlas.yaml over config.yaml + paper.yaml (the README's atlas of jet patients):
+    valid, the paper's jet and window unchanged, 2.8 mm lumen cells and the jet cylinder one level
+    finer: 1.4 mm, 11.28 / 1.4 = 8.06 cells across the 1 cm2 jet; its sheet: demo aortas 1-3."""
+    import csv
+
+    import yaml
+    from snakemake.utils import validate
+
+    repo = Path(__file__).resolve().parents[2]
+    cfg: dict = {}
+    for name in ("config.yaml", "paper.yaml", "paper_atlas.yaml"):
+        cfg = deep_merge(cfg, yaml.safe_load((repo / "config" / name).read_text()))
+    validate(cfg, str(repo / "workflow" / "schemas" / "config.schema.yaml"))
+    cfd = cfg["cfd"]
+    assert cfd["inlet"]["velocity"] == 1.2 and cfd["inlet"]["valve_area"] == 1.0e-4
+    assert cfd["solver"]["transient"]["flow_throughs"] == 10 and cfd["mesh"]["layers"] > 0
+    sheet = repo / cfg["patients"]
+    rows = list(csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t"))
+    assert [(r["id"], r["mesh"]) for r in rows] == [
+        (f"demo_aorta_{s}", f"results/demo/aorta_seed{s}.stl") for s in (1, 2, 3)
+    ]
+    cfd.pop("flavour")
+    state = render_case(tmp_path / "atlas", _tube(tmp_path), cfd, flavour="esi")
+    d_jet = 2 * np.sqrt(1.0e-4 / np.pi)
+    assert state["jet_region"]["level"] == 1 and state["jet_region"]["cell_size"] == pytest.approx(1.4e-3)
+    assert state["jet_region"]["cells_across"] == pytest.approx(d_jet / 1.4e-3)
+
+
 def test_bad_cfd_words_and_removed_fallback(tmp_path):
     stl = _tube(tmp_path)
     with pytest.raises(VCSInputError, match="'average'.*removed.*transient") as e:

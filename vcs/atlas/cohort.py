@@ -207,8 +207,9 @@ class Atlas:
     alignment_mean : (n_tau_align * n_theta_align, 3) float, mm
         GPA mean wall grid, the target a new vessel is aligned to.
     field_sources : dict
-        {included patient id: ``time_average`` (the transient fallback's window means) or
-        ``instantaneous`` (a converged steady state)}, from each patient's fields ``field_source``.
+        {included patient id: ``time_average`` (the transient fallback's window means),
+        ``instantaneous`` (a converged steady state), from each patient's fields ``field_source``,
+        or ``simple_iterate_average`` (a legacy status admitted by ``accept_relaxed``)}.
     """
 
     patients: list[str]
@@ -372,8 +373,16 @@ def compute_atlas(
         },
         gpa_mean,
         stages,
-        {p: str(np.asarray(fields[p].get("field_source", "instantaneous"))) for p in patients},
+        {p: _field_source(fields[p], statuses.get(p)) for p in patients},
     )
+
+
+def _field_source(fields: Mapping[str, Any], status: Mapping[str, Any] | None) -> str:
+    """What an included patient's flow is: ``time_average``, ``instantaneous`` (a steady state) or,
+    for a legacy status admitted by ``accept_relaxed``, ``simple_iterate_average``."""
+    if status and status.get("converged") is False and status.get("converged_relaxed") is True:
+        return "simple_iterate_average"
+    return str(np.asarray(fields.get("field_source", "instantaneous")))
 
 
 def project_model(atlas: Atlas, model: VesselModel, *, n_modes: int | None = None) -> dict[str, Any]:
