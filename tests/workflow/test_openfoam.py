@@ -590,6 +590,9 @@ def test_bad_cfd_words_and_removed_fallback(tmp_path):
         render_case(tmp_path / "c", stl, {"solver": {"transient": {"max_co": 5}}}, flavour="esi")
     with pytest.raises(VCSInputError, match="flow_throughs must be a number"):
         render_case(tmp_path / "d", stl, {"solver": {"transient": {"flow_throughs": "5"}}}, flavour="esi")
+    for bad in (1.5, -1, 11, True, "1"):
+        with pytest.raises(VCSInputError, match="max_doublings must be a whole number in"):
+            render_case(tmp_path / "e", stl, {"solver": {"transient": {"max_doublings": bad}}}, flavour="esi")
 
 
 def test_transient_plan_from_flow_through_time():
@@ -774,6 +777,60 @@ def test_jet_transient_too_short_window_is_not_stationary(tmp_path):
     assert "washout" not in tr["time_steps"] and tr["washout_s"] == 0
     assert (tmp_path / "short" / tr["mid_time_folder"] / "UMean").exists()  # reconstructed
     assert "reconstructPar" in st["timings_s"]
+    assert tr["extensions"] == []  # max_doublings 0 (the package default): the window is never extended
+
+
+def _averaging_total_time(time_dir: Path) -> float:
+    """fieldAverage's accumulated averaging time of UMean, as the function object stored it
+    (ESI: uniform/functionObjects/functionObjectProperties, fieldAverage { U { totalTime } })."""
+    from PyFoam.RunDictionary.ParsedParameterFile import ParsedParameterFile
+
+    props = ParsedParameterFile(str(time_dir / "uniform" / "functionObjects" / "functionObjectProperties"))
+    return float(props["fieldAverage"]["U"]["totalTime"])
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_jet_transient_window_doubled_until_stationary(tmp_path):
+    """The same too-short window (1/50 flow-through after 3 SIMPLE iterations) with
+    max_doublings 4: the window is doubled, the average continued, until the halves agree or 4
+    doublings (0.32 flow-through times) are done; the accumulated averaging time of the final means is the whole window
+    (fieldAverage continued, not restarted), the middle is the previous window's end."""
+    cfg = deep_merge(
+        JET_CFG,
+        {
+            "solver": {
+                "max_iterations": 3,
+                "startup_iterations": 1,
+                "transient": {"flow_throughs": 0.02, "washout_flow_throughs": 0.0, "max_doublings": 4},
+            }
+        },
+    )
+    render_case(tmp_path / "ext", _jet_tube(tmp_path), cfg, flavour="esi")
+    st = run_case(tmp_path / "ext", ranks=1)
+    tr = st["transient"]
+    assert tr["evaluated"], st["reason"]
+    n = len(tr["extensions"])
+    assert 1 <= n <= 4, tr["extensions"]
+    # (the first window is rounded up to 3 significant digits of seconds: within 1 %)
+    wins = [e["window_flow_throughs"] for e in tr["extensions"]]
+    assert wins == pytest.approx([0.02 * 2**k for k in range(n)], rel=0.01)
+    assert tr["window_flow_throughs"] == pytest.approx(0.02 * 2**n, rel=0.01)
+    assert set(tr["time_steps"]) == {"average", *(f"extend{k + 1}" for k in range(n))}
+    assert tr["end_time"] - tr["averaging_start_time"] == pytest.approx(tr["window_s"])
+    assert float(tr["mid_time_folder"]) == pytest.approx(tr["averaging_start_time"] + tr["window_s"] / 2)
+    # fieldAverage continued: the final means cover the whole window, the middle ones its first half
+    assert _averaging_total_time(tmp_path / "ext" / tr["end_time_folder"]) == pytest.approx(tr["window_s"], rel=1e-6)
+    mid = tmp_path / "ext" / tr["mid_time_folder"]
+    assert _averaging_total_time(mid) == pytest.approx(tr["window_s"] / 2, rel=1e-6)
+    # the first window was not stationary (as in the test above); the last verdict decides
+    first = tr["extensions"][0]
+    assert any(first[k] > tr["tolerances"][k] for k in tr["tolerances"])
+    if tr["stationary"]:
+        assert st["converged"] is True and st["reason"] is None
+    else:
+        assert n == 4 and st["converged"] is False and "max_doublings" in st["reason"]
+    assert "doubled" in st["criterion"] and "at most 4 times (up to 0.32 flow-through times)" in st["criterion"]
 
 
 @pytest.mark.openfoam

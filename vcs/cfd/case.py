@@ -204,6 +204,7 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "residual_control": True,
         "transient": False,
         "average": False,
+        "average_continue": False,
         "cell_volumes": False,
         "write_interval": None,
         "max_delta_t": None,

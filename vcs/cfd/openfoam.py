@@ -101,6 +101,8 @@ DEFAULTS: dict[str, Any] = {
         # from the SIMPLE state and report time averages (converged only when stationary)
         "transient": {
             "flow_throughs": 5.0,  # averaging window [flow-through times V_lumen / Q]
+            # not stationary: the window is doubled (the average continued) at most this many times
+            "max_doublings": 0,
             "washout_flow_throughs": 1.0,  # start-up wash-out before averaging [flow-through times]
             "max_co": 1.0,  # Courant number limit of the adjustable time step
             "stationarity_tolerance": 0.05,  # max relative difference of the two half-window means
@@ -243,6 +245,11 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _word(cfd, "io.write_format", ("ascii",))
     _number(cfd, "solver.transient.flow_throughs", 0.0, 1e3, lo_open=True)
     _number(cfd, "solver.transient.washout_flow_throughs", 0.0, 1e3)
+    n_dbl = cfd["solver"]["transient"].get("max_doublings", 0)
+    if not (isinstance(n_dbl, int) and not isinstance(n_dbl, bool) and 0 <= n_dbl <= 10):
+        raise VCSInputError(
+            f"cfd.solver.transient.max_doublings must be a whole number in [0, 10] (0 = never extend), not {n_dbl!r}"
+        )
     _number(cfd, "solver.transient.max_co", 0.0, 2.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
     _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)

@@ -524,6 +524,12 @@ def _criterion_text(sol: dict[str, Any]) -> str:
             f"within {100 * tr['stationarity_tolerance']:g} % (inlet-outlet pressure difference, mean TAWSS) "
             f"and {100 * tr['stationarity_tolerance_U']:g} % (volume L2 of U)"
         )
+        if int(tr.get("max_doublings") or 0) > 0:
+            n = int(tr["max_doublings"])
+            txt += (
+                f"; a window that is not stationary is doubled, the average continued, at most {n} time"
+                f"{'s' if n > 1 else ''} (up to {tr['flow_throughs'] * 2**n:g} flow-through times)"
+            )
     return txt
 
 
@@ -849,6 +855,54 @@ def _transient_fallback(
                 return fail("reconstructPar failed", "reconstructPar")
         tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
         verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
+        # not stationary: double the window, continuing the average, at most max_doublings times
+        doublings = int(state["cfd"]["solver"]["transient"].get("max_doublings") or 0)
+        extensions: list[dict[str, Any]] = []
+        tr["extensions"] = extensions
+        while not verdict["stationary"] and len(extensions) < doublings:
+            extensions.append(
+                {"window_flow_throughs": plan["window_flow_throughs"], **verdict["half_window_differences"]}
+            )
+            w = plan["window_s"]
+            plan = {
+                **plan,
+                "window_s": 2 * w,
+                "window_flow_throughs": 2 * plan["window_flow_throughs"],
+                "mid_time": plan["end_time"],
+                "end_time": plan["end_time"] + w,
+            }
+            tr.update(plan)
+            render_files(
+                case_dir,
+                state,
+                STAGE_FILES,
+                end_time=_fmt_time(plan["end_time"]),
+                write_interval=_fmt_time(w),
+                average=True,
+                average_continue=True,
+                **common,
+            )
+            log = f"pimpleFoam.extend{len(extensions)}"
+            r = run(["pimpleFoam"], log, ranks)
+            parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
+            steps[f"extend{len(extensions)}"] = len(parsed["rows"])
+            if r.returncode != 0:
+                return fail(_solver_failure(case_dir / "logs" / f"log.{log}", log, "pimpleFoam"), log)
+            last = _time_dirs(root)[-1]
+            if abs(last[0] - plan["end_time"]) > slack:
+                return fail(f"the window extension ended at {last[1]} (planned {_fmt_time(plan['end_time'])})", log)
+            if ranks > 1 and run(["reconstructPar", "-time", last[1]], "reconstructPar").returncode != 0:
+                return fail("reconstructPar failed", "reconstructPar")
+            mid, end = end, last
+            tr["courant_max"] = max(tr["courant_max"] or 0.0, parsed["courant_max"] or 0.0)
+            lo = [x for x in (tr["delta_t_s"]["min"], parsed["delta_t_min"]) if x is not None]
+            hi = [x for x in (tr["delta_t_s"]["max"], parsed["delta_t_max"]) if x is not None]
+            tr["delta_t_s"] = {"min": min(lo) if lo else None, "max": max(hi) if hi else None}
+            tr["solver_log"] = _log_summary(parsed, case_dir / "logs" / f"log.{log}")
+            if parsed["rows"]:
+                tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
+            tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
+            verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
         tr.update(verdict)
         tr["evaluated"] = True
         status["criterion_used"] = "time_average_stationary"
@@ -992,7 +1046,7 @@ def stationarity(
             f"({plan['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
             f"{plan['washout_s']:.3g} s wash-out) differ by "
             + ", ".join(f"{100 * diffs[k]:.3g} % in {words[k]} (tolerance {100 * tols[k]:g} %)" for k in bad)
-            + "; lengthen cfd.solver.transient.flow_throughs (or washout_flow_throughs)"
+            + "; lengthen cfd.solver.transient.flow_throughs or max_doublings (or washout_flow_throughs)"
         )
     return out
 
