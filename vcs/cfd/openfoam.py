@@ -41,6 +41,9 @@ DEFAULTS: dict[str, Any] = {
         "max_background_cells": 100_000,  # blockMesh box cells; above: coarser box, levels raised
         "min_patch_faces": 20,  # each STL solid must become a patch of at least this many faces
         "pad_cells": 3,  # background box = STL bounds + pad_cells background cells on every side
+        # background grid along the coordinate axes, or the inlet's frame (its plane parallel to
+        # the grid: no snapped prisms in the inflow, the jet along a grid axis)
+        "background_frame": "axes",
         "surface_level": [0, 0],  # snappy (min max) refinement level on the whole vessel surface
         "wall_level": [0, 0],  # ... on the wall solid
         "inlet_level": [0, 0],  # ... on the inlet solid (raise to resolve the jet's shear layer)
@@ -238,6 +241,7 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _number(cfd, "mesh.max_cells", 1, 1e10)
     _number(cfd, "mesh.max_background_cells", 1, 1e10)
     _number(cfd, "mesh.min_patch_faces", 1, 1e9)
+    _word(cfd, "mesh.background_frame", ("axes", "inlet"))
     _word(cfd, "solver.fallback", FALLBACKS)
     _word(cfd, "solver.startup_scheme", DIV_SCHEMES)
     _word(cfd, "solver.div_scheme", DIV_SCHEMES)
