@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -449,6 +450,64 @@ def test_jet_region_resolves_the_jet(tmp_path):
     assert coarse["level"] == 2 and coarse["cells_across"] >= 10
     assert jet_region(solids, deep_merge(cfd, {"inlet": {"type": "parabolic"}})) is None
     assert jet_region(solids, deep_merge(cfd, {"mesh": {"jet_refinement": {"enabled": False}}})) is None
+
+
+def test_background_in_the_inlet_frame(tmp_path):
+    """background_frame inlet: the blockMesh box is an orthonormal box whose third axis is the
+    inlet's inward normal (the tube's tilted axis), the inlet plane 0.75 of a finest inlet cell
+    above one of its grid planes; axes (default): the coordinate box."""
+    cfd = deep_merge(JET_CFG, {"mesh": {"background_frame": "inlet"}})
+    st = render_case(tmp_path / "inlet", _jet_tube(tmp_path), cfd, flavour="esi")
+    c = np.array(st["corners"])
+    ax = JET_AXIS / np.linalg.norm(JET_AXIS)
+    e = [c[1] - c[0], c[3] - c[0], c[4] - c[0]]  # the box's edges from corner 0
+    assert abs(e[0] @ e[1]) + abs(e[0] @ e[2]) + abs(e[1] @ e[2]) < 1e-12  # a rectangular box
+    assert np.cross(e[0], e[1]) @ e[2] > 0  # right-handed (blockMesh's hex ordering)
+    assert e[2] / np.linalg.norm(e[2]) @ ax == pytest.approx(1.0, abs=1e-9)
+    hb = st["mesh_sizing"]["background"]["background_cell_size_m"]
+    n = st["ncells"]
+    assert [np.linalg.norm(v) for v in e] == pytest.approx([k * hb for k in n])
+    # the tube's inlet is the plane through the origin normal to its axis (write_closed_tube_stl)
+    h_fine = hb / 2 ** max(st["jet_region"]["level"], max(lv for s in st["solids"] for lv in s["level"]))
+    depth = (np.zeros(3) - c[0]) @ ax  # from the box's bottom plane to the inlet plane
+    assert (depth / h_fine) % 1.0 == pytest.approx(0.75, abs=1e-6)
+    bm = (tmp_path / "inlet" / "system" / "blockMeshDict").read_text()
+    assert "inlet's frame" in bm and f"({c[6][0]} {c[6][1]} {c[6][2]})" in bm
+    axes = render_case(tmp_path / "axes", _jet_tube(tmp_path), JET_CFG, flavour="esi")
+    assert axes["background_frame"]["type"] == "axes"
+    ca = np.array(axes["corners"])
+    assert np.allclose(ca[6] - ca[0], np.subtract(axes["bmax"], axes["bmin"]))
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_inlet_frame_background_gives_a_uniform_inflow_row(tmp_path):
+    """Meshed (blockMesh + snappyHexMesh), the tilted tube's first cell row at the inlet (inside
+    the rim) is one slab of hexahedra of equal depth with the inlet-frame background; with the
+    coordinate axes the oblique inlet plane cuts the grid into cells of every depth, prisms and
+    polyhedra among them (the Courant number of such cells set a jet's time step)."""
+    import pyvista as pv
+
+    env = {**os.environ, "WM_PROJECT_DIR": os.environ.get("WM_PROJECT_DIR", "/usr/share/openfoam")}
+    ax = JET_AXIS / np.linalg.norm(JET_AXIS)
+    depth, types = {}, {}
+    for frame in ("inlet", "axes"):
+        case = tmp_path / frame
+        st = render_case(case, _jet_tube(tmp_path), deep_merge(JET_CFG, {"mesh": {"background_frame": frame}}))
+        for cmd in (["blockMesh"], ["snappyHexMesh", "-overwrite"]):
+            r = subprocess.run(cmd, cwd=case, capture_output=True, text=True, env=env)
+            assert r.returncode == 0, r.stdout[-2000:]
+        h = st["mesh_sizing"]["smallest_cell_m"]  # the jet cylinder's cells, at the inlet
+        (case / "c.foam").touch()
+        mesh = pv.OpenFOAMReader(str(case / "c.foam")).read()["internalMesh"]
+        cc = mesh.cell_centers().points
+        d = cc @ ax  # the inlet plane passes through the origin (write_closed_tube_stl)
+        rad = np.linalg.norm(cc - np.outer(d, ax), axis=1)
+        first = (d < 1.3 * h) & (rad < JET_R - 2 * h)  # the first row inside the rim
+        depth[frame] = d[first] / h
+        types[frame] = set(np.asarray(mesh.celltypes)[first].tolist())
+    assert types["inlet"] == {12} and np.ptp(depth["inlet"]) < 0.05, (types, depth["inlet"])  # VTK_HEXAHEDRON
+    assert types["axes"] != {12} and np.ptp(depth["axes"]) > 0.5, (types, depth["axes"])
 
 
 @pytest.mark.parametrize("flavour", ["esi", "org10"])

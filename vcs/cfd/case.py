@@ -132,8 +132,9 @@ def align_background_to_inlet(bg: dict[str, Any], h_fine: float, offset: float =
     """The background box (in the inlet frame, :func:`inlet_frame`) moved along n so that the inlet
     plane (n = 0) lies ``offset`` of a finest-level cell ``h_fine`` above a grid plane.
 
-    Snapped to a plane parallel to the grid, every first cell row at the inlet is then the same
-    prism-free slab (1 + (1 - offset) = 1.25 cells ``h_fine`` thick for 0.75). With an inlet
+    Snapped to a plane parallel to the grid, the first cell row at the inlet is then one uniform,
+    prism-free slab of hexahedra (0.87 ``h_fine`` thick on the test tube after snappyHexMesh's
+    smoothing, every inner cell alike). With an inlet
     plane oblique to the grid, snapping halves some hexes into prisms where the plane crosses a
     grid plane; on demo aorta seed 1 four of them in the jet disc had twice the Courant number
     of any other cell and halved pimpleFoam's time step (README, "The paper's jet").
