@@ -776,6 +776,10 @@ def _transient_fallback(
 ) -> dict[str, Any]:
     """Run the transient fallback and judge its stationarity; fills ``status``; never raises.
 
+    Wash-out, averaging window, stationarity test of its halves; a window that is not stationary
+    is doubled (pimpleFoam continued, fieldAverage continuing its sums) and re-tested, at most
+    ``transient.max_doublings`` times (``status["transient"]["extensions"]``).
+
     Returns the ``status["transient"]`` dict (``evaluated`` true when the half-window test ran).
     """
     simple_reason = status["reason"]
