@@ -20,16 +20,11 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
-import platform
-import subprocess
 import sys
 import tempfile
-import time
-from datetime import date
 from pathlib import Path
 
-from real_cohort import job_seconds  # bench/ is on sys.path when this runs as a script
+from real_cohort import job_seconds, run_workflow  # bench/ is on sys.path when this runs as a script
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = ("config.yaml", "paper.yaml", "paper_atlas.yaml")
@@ -97,21 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         wd.mkdir(parents=True, exist_ok=True)
         sheet = REPO / "config" / "paper_atlas_patients.tsv"
         ids = [r["id"] for r in csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t")]
-        cmd = [
-            str(Path(sys.executable).parent / "snakemake"),
-            *("-s", str(REPO / "Snakefile"), "-d", str(wd), "--configfile"),
-            *(str(REPO / "config" / c) for c in CONFIGS),
-            *("--config", f"patients={sheet}", "--profile", str(REPO / "profiles" / "local")),
-            *("--cores", str(a.cores)),
-        ]
-        t0 = time.perf_counter()
-        r = subprocess.run(cmd, cwd=wd, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
+        r = run_workflow(wd, list(CONFIGS), str(sheet), a.cores, f"jet atlas, {' + '.join(CONFIGS)}")
         res = wd / "results"
-        print(
-            f"jet atlas, {' + '.join(CONFIGS)}, {date.today()}, {platform.node()} ({os.cpu_count()} cores), "
-            f"load {os.getloadavg()[0]:.1f}: snakemake exit {r.returncode}, {wall:.0f} s wall"
-        )
         print(
             "| patient | cells | jet cells across | layer coverage | SIMPLE iterations | flow-through s "
             "| wash-out + window s | time steps | dt ms | half-window differences % (dp / TAWSS / U) "

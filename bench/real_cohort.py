@@ -46,6 +46,26 @@ def sheet(dst: Path) -> list[str]:
     return [r["id"] for r in rows]
 
 
+def run_workflow(wd: Path, configs: list[str], patients: str, cores: int, title: str) -> subprocess.CompletedProcess:
+    """Run the workflow in ``wd`` (config/<configs> merged in order, the patients sheet
+    ``patients``, the local profile) and print one line: title, date, machine, load, exit, wall."""
+    cmd = [
+        str(Path(sys.executable).parent / "snakemake"),
+        *("-s", str(REPO / "Snakefile"), "-d", str(wd), "--configfile"),
+        *(str(REPO / "config" / c) for c in configs),
+        *("--config", f"patients={patients}", "--profile", str(REPO / "profiles" / "local")),
+        *("--cores", str(cores), "--rerun-incomplete"),
+    ]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, cwd=wd, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    print(
+        f"{title}, {date.today()}, {platform.node()} ({os.cpu_count()} cores), "
+        f"load {os.getloadavg()[0]:.1f}: snakemake exit {r.returncode}, {wall:.0f} s wall"
+    )
+    return r
+
+
 def job_seconds(res: Path, pid: str) -> float:
     """Wall seconds of one patient's workflow jobs (:data:`JOBS`), from Snakemake's benchmark files."""
     return sum(
@@ -82,20 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         wd = (a.workdir or Path(tmp)).resolve()
         wd.mkdir(parents=True, exist_ok=True)
         ids = sheet(wd / "patients.tsv")
-        cmd = [
-            str(Path(sys.executable).parent / "snakemake"),
-            *("-s", str(REPO / "Snakefile"), "-d", str(wd), "--configfile", str(REPO / "config" / "config.yaml")),
-            *("--config", "patients=patients.tsv", "--profile", str(REPO / "profiles" / "local")),
-            *("--cores", str(a.cores)),
-        ]
-        t0 = time.perf_counter()
-        r = subprocess.run(cmd, cwd=wd, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
+        r = run_workflow(wd, ["config.yaml"], "patients.tsv", a.cores, "real cohort, default config")
         res = wd / "results"
-        print(
-            f"real cohort, default config, {date.today()}, {platform.node()} ({os.cpu_count()} cores), "
-            f"load {os.getloadavg()[0]:.1f}: snakemake exit {r.returncode}, {wall:.0f} s wall"
-        )
         print(
             "| vessel | cell mm (set by) | cells | wall / inlet / outlet faces | layer coverage | SIMPLE iterations "
             "(criterion) | final residuals p / U | inlet - outlet pressure Pa | WSS mean / max Pa | inflow L/min "
