@@ -63,6 +63,9 @@ def run_workflow(wd: Path, configs: list[str], patients: str, cores: int, title:
         f"{title}, {date.today()}, {platform.node()} ({os.cpu_count()} cores), "
         f"load {os.getloadavg()[0]:.1f}: snakemake exit {r.returncode}, {wall:.0f} s wall"
     )
+    if r.returncode:  # say why (a stale lock, a failed job) before the table of what exists
+        errors = [ln for ln in r.stderr.splitlines() if ln.strip()][-6:]
+        print("snakemake's last lines:\n  " + "\n  ".join(errors), file=sys.stderr)
     return r
 
 
