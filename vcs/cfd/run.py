@@ -7,6 +7,7 @@ coverage collected into ``status.json``."""
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import re
@@ -35,6 +36,8 @@ from vcs.cfd.foamfiles import (
     window_mean,
 )
 from vcs.cfd.openfoam import detect_openfoam, foam_env
+
+_log = logging.getLogger(__name__)  # progress of a case (the workflow's openfoam_solve log)
 
 # --------------------------------------------------------------------------- running
 
@@ -96,6 +99,7 @@ class _Runner:
                     mpi += ["-x", var]
             cmd = mpi + cmd + ["-parallel"]
         t0 = time.perf_counter()
+        _log.info("running %s (logs/log.%s)", " ".join(args), log)
         with open(self.logs / f"log.{log}", "w") as fh:
             fh.write(f"# {' '.join(cmd)}\n")
             fh.flush()
@@ -804,6 +808,18 @@ def _transient_fallback(
         plan = transient_plan(state, float(volume), times[-1][0], float(prof["peak_velocity"]))
         tr.update(plan)
         tr["started_from"] = f"SIMPLE iteration {times[-1][1]}"
+        _log.info(
+            "steady SIMPLE not converged (%s): transient fallback from iteration %s, flow-through time "
+            "%.3g s, wash-out %.3g s, window %.3g s (%.3g flow-through times), solver time %s to %s",
+            simple_reason,
+            times[-1][1],
+            plan["flow_through_time_s"],
+            plan["washout_s"],
+            plan["window_s"],
+            plan["window_flow_throughs"],
+            _fmt_time(plan["start_time"]),
+            _fmt_time(plan["end_time"]),
+        )
         steps: dict[str, int] = {}
         tr["time_steps"] = steps
         common = {
@@ -859,6 +875,7 @@ def _transient_fallback(
                 return fail("reconstructPar failed", "reconstructPar")
         tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
         verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
+        _log_verdict(plan, verdict)
         # not stationary: double the window, continuing the average, at most max_doublings times
         doublings = int(state["cfd"]["solver"]["transient"].get("max_doublings") or 0)
         extensions: list[dict[str, Any]] = []
@@ -876,6 +893,13 @@ def _transient_fallback(
                 "end_time": plan["end_time"] + w,
             }
             tr.update(plan)
+            _log.info(
+                "doubling the window to %.3g flow-through times (%d of at most %d): pimpleFoam continues to %s",
+                plan["window_flow_throughs"],
+                len(extensions),
+                doublings,
+                _fmt_time(plan["end_time"]),
+            )
             render_files(
                 case_dir,
                 state,
@@ -907,6 +931,7 @@ def _transient_fallback(
                 tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
             tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
             verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
+            _log_verdict(plan, verdict)
         tr.update(verdict)
         tr["evaluated"] = True
         status["criterion_used"] = "time_average_stationary"
@@ -926,6 +951,24 @@ def _transient_fallback(
         return tr
     except Exception as exc:  # noqa: BLE001 - the fallback never raises: its failure is a reason
         return fail(f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+
+
+_HALF_WORDS = {  # the half-window differences of :func:`stationarity`, in words
+    "inlet_minus_outlet_pressure": "inlet-outlet pressure difference",
+    "tawss_mean": "mean TAWSS",
+    "U_L2": "U (L2)",
+}
+
+
+def _log_verdict(plan: dict[str, Any], verdict: dict[str, Any]) -> None:
+    """One log line: the stationarity test of a window (:func:`stationarity`)."""
+    d, tol = verdict["half_window_differences"], verdict["tolerances"]
+    _log.info(
+        "window of %.3g flow-through times: half-window differences %s: %s",
+        plan["window_flow_throughs"],
+        ", ".join(f"{_HALF_WORDS[k]} {100 * d[k]:.2g} % (tolerance {100 * tol[k]:g} %)" for k in d),
+        "stationary" if verdict["stationary"] else "not stationary",
+    )
 
 
 def _wall_faces(case_dir: Path, state: dict[str, Any]) -> list[tuple[str, NDArray[np.floating]]]:
@@ -1028,11 +1071,6 @@ def stationarity(
         "U_L2": float(tr["stationarity_tolerance_U"]),
     }
     bad = [k for k in diffs if not diffs[k] <= tols[k]]  # NaN counts as not stationary
-    words = {
-        "inlet_minus_outlet_pressure": "inlet-outlet pressure difference",
-        "tawss_mean": "mean TAWSS",
-        "U_L2": "U (L2)",
-    }
     out: dict[str, Any] = {
         "halves": {
             "first": {"inlet_minus_outlet_pressure_Pa": dp1 * rho, "tawss_mean_Pa": tm1 * rho},
@@ -1049,7 +1087,7 @@ def stationarity(
             f"time average not stationary: the two halves of the {plan['window_s']:.4g} s averaging window "
             f"({plan['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
             f"{plan['washout_s']:.3g} s wash-out) differ by "
-            + ", ".join(f"{100 * diffs[k]:.3g} % in {words[k]} (tolerance {100 * tols[k]:g} %)" for k in bad)
+            + ", ".join(f"{100 * diffs[k]:.3g} % in {_HALF_WORDS[k]} (tolerance {100 * tols[k]:g} %)" for k in bad)
             + "; lengthen cfd.solver.transient.flow_throughs or max_doublings (or washout_flow_throughs)"
         )
     return out
