@@ -612,7 +612,7 @@ def test_paper_config_is_the_papers_jet(tmp_path):
 def test_paper_atlas_config_keeps_the_jet_at_level_1(tmp_path):
     """config/paper_atlas.yaml over config.yaml + paper.yaml (the README's atlas of jet patients):
     valid, the paper's jet and window unchanged, 2.8 mm lumen cells and the jet cylinder one level
-    finer: 1.4 mm, 11.28 / 1.4 = 8.06 cells across the 1 cm2 jet; its sheet: demo aortas 1-3."""
+    finer: 1.4 mm, 11.28 / 1.4 = 8.06 cells across the 1 cm2 jet; its sheet: demo aortas 0-3."""
     import csv
 
     import yaml
@@ -629,7 +629,7 @@ def test_paper_atlas_config_keeps_the_jet_at_level_1(tmp_path):
     sheet = repo / cfg["patients"]
     rows = list(csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t"))
     assert [(r["id"], r["mesh"]) for r in rows] == [
-        (f"demo_aorta_{s}", f"results/demo/aorta_seed{s}.stl") for s in (1, 2, 3)
+        (f"demo_aorta_{s}", f"results/demo/aorta_seed{s}.stl") for s in (0, 1, 2, 3)
     ]
     cfd.pop("flavour")
     state = render_case(tmp_path / "atlas", _tube(tmp_path), cfd, flavour="esi")
@@ -850,11 +850,13 @@ def _averaging_total_time(time_dir: Path) -> float:
 
 @pytest.mark.openfoam
 @needs_foam
-def test_jet_transient_window_doubled_until_stationary(tmp_path):
+def test_jet_transient_window_doubled_until_stationary(tmp_path, caplog):
     """The same too-short window (1/50 flow-through after 3 SIMPLE iterations) with
     max_doublings 4: the window is doubled, the average continued, until the halves agree or 4
     doublings (0.32 flow-through times) are done; the accumulated averaging time of the final means is the whole window
-    (fieldAverage continued, not restarted), the middle is the previous window's end."""
+    (fieldAverage continued, not restarted), the middle is the previous window's end. The job
+    log says, as it happens, each window's verdict and each doubling."""
+    caplog.set_level("INFO", logger="vcs.cfd.run")
     cfg = deep_merge(
         JET_CFG,
         {
@@ -890,6 +892,17 @@ def test_jet_transient_window_doubled_until_stationary(tmp_path):
     else:
         assert n == 4 and st["converged"] is False and "max_doublings" in st["reason"]
     assert "doubled" in st["criterion"] and "at most 4 times (up to 0.32 flow-through times)" in st["criterion"]
+    # the progress lines: the plan, then per window its verdict, then a doubling when one follows
+    lines = [r.getMessage() for r in caplog.records if r.name == "vcs.cfd.run"]
+    assert any(ln.startswith("steady SIMPLE not converged") and "transient fallback" in ln for ln in lines)
+    verdicts = [ln for ln in lines if ln.startswith("window of ")]
+    doublings = [ln for ln in lines if ln.startswith("doubling the window")]
+    assert len(verdicts) == n + 1 and len(doublings) == n, lines
+    assert all(ln.endswith(": not stationary") for ln in verdicts[:-1])
+    assert verdicts[-1].endswith(": stationary" if tr["stationary"] else ": not stationary")
+    for k, ln in enumerate(doublings):
+        assert f"({k + 1} of at most 4)" in ln and f"{wins[k] * 2:.3g} flow-through" in ln
+    assert any(ln.startswith("running pimpleFoam (logs/log.pimpleFoam.extend1)") for ln in lines)
 
 
 @pytest.mark.openfoam
