@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """The README's jet-atlas table: config/paper.yaml + config/paper_atlas.yaml (the paper's jet,
-steady SIMPLE then the transient time average over 10 flow-through times, on three demo aortas)
+steady SIMPLE then the transient time average over 10 flow-through times, on four demo aortas)
 through the whole workflow, then one row per patient from its status.json and the workflow's
 benchmark files, and the atlas's field sources and explained variances.
 
     .venv/bin/python bench/jet_atlas.py [-d DIR] [--cores 2]
 
-Needs OpenFOAM; ~2-3 hours on 2 cores (README, "An atlas of jet patients"). DIR (default: a
+Needs OpenFOAM; ~3 hours on 2 cores (5.4 CPU hours of solver) (README, "An atlas of jet patients"). DIR (default: a
 temporary folder) is the Snakemake working directory; a finished DIR is only re-read. Prints, per
 patient: cells, jet cells across, layer coverage, SIMPLE iterations, flow-through time, wash-out +
 window, pimpleFoam time steps and their size, the half-window differences of the stationarity
