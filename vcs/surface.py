@@ -8,11 +8,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import Delaunay
 
 from vcs.errors import VCSInputError
 from vcs.mesh import orient_outward, write_stl_ascii
@@ -53,71 +52,113 @@ def _grid_faces(n_rows: int, n_theta: int, offset: int = 0) -> np.ndarray:
     return np.concatenate([t1, t2])
 
 
-def _ring_cap(
-    ring: NDArray[np.floating], center: NDArray[np.floating], spacing: float, r_max: float, offset: tuple[int, int]
-) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
-    """Cap of a star-shaped section that Delaunay cannot close (non-convex boundary): copies of the
-    boundary ring scaled towards ``center`` (nested, so never crossing), joined by quads, and a
-    fan around the centre. Same return convention as :func:`_cap`."""
-    n = len(ring)
-    m = max(2, int(round(r_max / spacing)))
-    scales = 1.0 - np.arange(1, m) / m
-    inner = center + scales[:, None, None] * (ring - center)[None]  # (m - 1, n, 3)
-    verts = np.vstack([inner.reshape(-1, 3), center[None]])
-    ids = np.vstack([offset[0] + np.arange(n)[None], offset[1] + np.arange((m - 1) * n).reshape(m - 1, n)])
-    faces = []
-    for a, b in zip(ids[:-1], ids[1:]):
-        a2, b2 = np.roll(a, -1), np.roll(b, -1)
-        faces += [np.column_stack([a, a2, b2]), np.column_stack([a, b2, b])]
-    last, c = ids[-1], offset[1] + (m - 1) * n
-    faces.append(np.column_stack([last, np.roll(last, -1), np.full(n, c)]))
-    return verts, np.concatenate(faces)
-
-
 def _cap(
     ring: NDArray[np.floating], center: NDArray[np.floating], normal: NDArray[np.floating], offset: tuple[int, int]
 ) -> tuple[NDArray[np.floating], NDArray[np.integer]]:
-    """Triangulate a flat, star-shaped cap bounded by ``ring`` (n, 3) with near-equilateral
-    triangles: interior points on a hexagonal lattice + Delaunay, boundary edges kept as given.
+    """Triangulate the flat cap bounded by the closed polygon ``ring`` (n, 3), its vertices in
+    order: a constrained quality Delaunay triangulation of the polygon (Shewchuk's Triangle,
+    `triangle` on PyPI) with the ring's edges as segments (switch ``p``), no angle below 30
+    degrees where the boundary allows it (``q30``), no triangle larger than the equilateral one
+    on the ring's mean edge (``a``) and no point added on the ring (``Y``): the cap shares
+    exactly the wall's boundary edges. Any simple polygon is closed, convex, star-shaped or not.
 
-    ``offset`` = (index of ring[0] in the mesh, index of the first new interior vertex); returns
-    the new interior vertices and the cap faces in mesh indices.
+    Parameters
+    ----------
+    ring : (n, 3) float
+        The end section's boundary, in order, in one plane.
+    center : (3,) float
+        A point of that plane (the 2-D frame's origin).
+    normal : (3,) float
+        Unit normal of the plane.
+    offset : tuple of int
+        (index of ring[0] in the mesh, index of the first new interior vertex).
+
+    Returns
+    -------
+    vertices : (P, 3) float
+        The new interior vertices.
+    faces : (M, 3) int
+        The cap's triangles in mesh indices.
+
+    Raises
+    ------
+    CapError
+        When the triangulation is not a disc spanning the ring (:func:`cap_topology`), i.e. the
+        ring crosses itself or is degenerate.
     """
+    import triangle
+
     n = len(ring)
     e1 = ring[0] - center
-    e1 -= (e1 @ normal) * normal
+    e1 = e1 - (e1 @ normal) * normal
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(normal, e1)
     b2 = np.column_stack([(ring - center) @ e1, (ring - center) @ e2])
-    spacing = np.linalg.norm(np.diff(np.vstack([b2, b2[:1]]), axis=0), axis=1).mean()
-    r_max = np.linalg.norm(b2, axis=1).max()
-    m = int(np.ceil(r_max / spacing)) + 1
-    i, j = np.meshgrid(np.arange(-m, m + 1), np.arange(-m, m + 1), indexing="ij")
-    lat = np.column_stack([(i + 0.5 * j).ravel() * spacing, (j * np.sqrt(3) / 2).ravel() * spacing])
-    # keep lattice points well inside the boundary (star-shaped: compare radii at the same angle)
-    ang_b = np.arctan2(b2[:, 1], b2[:, 0])
-    order = np.argsort(ang_b)
-    ang_s = np.concatenate([ang_b[order] - TWO_PI, ang_b[order], ang_b[order] + TWO_PI])
-    rad_s = np.tile(np.linalg.norm(b2, axis=1)[order], 3)
-    r_lat = np.linalg.norm(lat, axis=1)
-    r_bnd = np.interp(np.arctan2(lat[:, 1], lat[:, 0]), ang_s, rad_s)
-    lat = lat[r_lat < r_bnd - 0.7 * spacing]
-    pts2 = np.vstack([b2, lat])
-    tri = Delaunay(pts2).simplices
-    # drop triangles outside the boundary polygon (centroid radius beyond the boundary)
-    cen = pts2[tri].mean(axis=1)
-    r_c = np.linalg.norm(cen, axis=1)
-    inside = r_c < np.interp(np.arctan2(cen[:, 1], cen[:, 0]), ang_s, rad_s)
-    tri = tri[inside]
-    # all boundary edges must be present, otherwise the cap is not watertight
-    bedges = {tuple(sorted((k, (k + 1) % n))) for k in range(n)}
-    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-    present = {tuple(x) for x in e.tolist()}
-    if not bedges <= present:  # a non-convex section (e.g. the sinus lobes of a root): nested rings
-        return _ring_cap(ring, center, spacing, r_max, offset)
+    spacing = float(np.linalg.norm(np.diff(np.vstack([b2, b2[:1]]), axis=0), axis=1).mean())
+    segments = np.column_stack([np.arange(n), (np.arange(n) + 1) % n])
+    max_area = np.sqrt(3.0) / 4.0 * spacing**2
+    out = triangle.triangulate({"vertices": b2, "segments": segments}, f"pq30a{max_area:.6g}YQ")
+    pts2 = np.asarray(out.get("vertices", np.zeros((0, 2))), float)
+    tri = np.asarray(out.get("triangles", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    topo = cap_topology(tri, segments)
+    if len(pts2) < n or not np.allclose(pts2[:n], b2, rtol=0, atol=1e-9 * max(spacing, 1e-300)):
+        topo["disc"] = False  # Triangle moved or merged ring vertices (a ring crossing itself)
+    if not topo["disc"]:
+        raise CapError(topo)
+    lat = pts2[n:]
     verts3 = center + lat[:, :1] * e1 + lat[:, 1:] * e2
     idx = np.where(tri < n, tri + offset[0], tri - n + offset[1])
     return verts3, idx
+
+
+class CapError(VCSInputError):
+    """An end cap that is not a triangulated disc; ``topology`` holds :func:`cap_topology`'s counts."""
+
+    def __init__(self, topology: dict[str, int | bool]) -> None:
+        self.topology = topology
+        super().__init__(f"the cap is not a disc ({topology})")
+
+
+def cap_topology(faces: NDArray[np.integer], ring_edges: NDArray[np.integer]) -> dict[str, int | bool]:
+    """Is a cap a triangulated disc spanning its boundary ring?
+
+    A disc: every ring edge is used by exactly one of the cap's triangles, every other edge by
+    exactly two, and the Euler characteristic V - E + F is 1 (a genus-0 surface with one boundary
+    loop; a closed genus-0 surface has 2, and each extra hole or handle lowers it by 1 or 2).
+
+    Parameters
+    ----------
+    faces : (M, 3) int
+        The cap's triangles.
+    ring_edges : (n, 2) int
+        The edges of the boundary ring the cap must span (vertex pairs, any order).
+
+    Returns
+    -------
+    dict
+        ``ring_edges_missing`` (ring edges in no triangle), ``ring_edges_overused`` (in more
+        than one), ``open_interior_edges`` (other edges in one triangle only),
+        ``overused_interior_edges`` (in more than two), ``euler_characteristic`` (int) and
+        ``disc`` (bool: all the counts 0 and the Euler characteristic 1).
+    """
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    ring = np.sort(np.asarray(ring_edges, np.int64).reshape(-1, 2), axis=1)
+    m = int(max(faces.max(initial=0), ring.max(initial=0)) + 1)
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    keys, count = np.unique(e[:, 0] * m + e[:, 1], return_counts=True)
+    ring_keys = np.unique(ring[:, 0] * m + ring[:, 1])
+    on_ring = np.isin(keys, ring_keys)
+    chi = len(np.unique(faces)) - len(keys) + len(faces)
+    out: dict[str, int | bool] = {
+        "ring_edges_missing": int((~np.isin(ring_keys, keys)).sum()),
+        "ring_edges_overused": int((count[on_ring] > 1).sum()),
+        "open_interior_edges": int((count[~on_ring] == 1).sum()),
+        "overused_interior_edges": int((count[~on_ring] > 2).sum()),
+        "euler_characteristic": int(chi),
+    }
+    counts_ok = not any(v for key, v in out.items() if key != "euler_characteristic")
+    out["disc"] = bool(chi == 1 and len(faces) > 0 and len(ring_keys) >= 3 and counts_ok)
+    return out
 
 
 def wall_mesh(
@@ -196,7 +237,15 @@ def wall_mesh(
         ring = grid[row]
         s_end = s0 if k == 0 else s1
         center = vcs.curve(float(k)) + (s_end[-1] if len(s_end) else 0.0) * d
-        v_cap, f_cap = _cap(ring, center, d, (row * n_theta, n_v))
+        try:
+            v_cap, f_cap = _cap(ring, center, d, (row * n_theta, n_v))
+        except CapError as exc:  # the section of a star-shaped rho_w > 0 is a simple polygon: ours
+            name = WallMesh.SOLIDS[k + 1]
+            raise VCSInputError(
+                f"the {name} end section (tau = {k}) could not be closed by a flat cap: its triangulation "
+                f"is not a disc ({', '.join(f'{a} {b}' for a, b in exc.topology.items() if a != 'disc')}); "
+                "this is a defect of `vcs wall`, not of the fit: please report it with the model.json"
+            ) from None
         all_v.append(v_cap)
         all_f.append(f_cap)
         all_s.append(np.full(len(f_cap), k + 1, np.int8))
@@ -247,8 +296,9 @@ def fold_check(model: VesselModel, *, n_tau: int = 401, n_theta: int = 72) -> di
     }
 
 
-def check_closed(mesh: WallMesh) -> dict[str, float | int | bool]:
-    """Is the Eq. 8 wall a valid closed volume for snappyHexMesh? (trimesh's mesh checks)
+def check_closed(mesh: WallMesh) -> dict[str, Any]:
+    """Is the Eq. 8 wall a valid closed volume for snappyHexMesh? (trimesh's mesh checks, and
+    :func:`cap_topology` on each end cap)
 
     Parameters
     ----------
@@ -261,22 +311,39 @@ def check_closed(mesh: WallMesh) -> dict[str, float | int | bool]:
         ``watertight`` (every edge shared by exactly two faces), ``winding_consistent``,
         ``volume_mm3`` (enclosed volume; positive when the faces point outward),
         ``euler_number`` (2 for a closed surface of genus 0, i.e. a tube with two caps),
-        ``min_angle_deg`` (smallest triangle angle) and ``closed`` (all of the above hold:
-        watertight, consistent, positive volume, Euler number 2).
+        ``min_angle_deg`` (smallest triangle angle), ``caps`` ({"inlet": ..., "outlet": ...}:
+        :func:`cap_topology` of each cap against the wall's boundary edges next to it),
+        ``caps_are_discs`` and ``closed`` (all of the above hold: watertight, consistent,
+        positive volume, Euler number 2, both caps discs).
     """
     import trimesh
 
     tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
     angles = np.degrees(tm.face_angles.min()) if len(tm.faces) else 0.0
-    out: dict[str, float | int | bool] = {
+    wall = mesh.faces[mesh.solid == 0]
+    we = np.sort(np.concatenate([wall[:, [0, 1]], wall[:, [1, 2]], wall[:, [2, 0]]]), axis=1)
+    we, n_use = np.unique(we, axis=0, return_counts=True)
+    wall_boundary = we[n_use == 1]
+    caps = {}
+    for k, name in enumerate(WallMesh.SOLIDS[1:], start=1):
+        cap = mesh.faces[mesh.solid == k]
+        ring = wall_boundary[np.isin(wall_boundary, cap).all(axis=1)]
+        caps[name] = cap_topology(cap, ring)
+    out: dict[str, Any] = {
         "watertight": bool(tm.is_watertight),
         "winding_consistent": bool(tm.is_winding_consistent),
         "volume_mm3": float(tm.volume),
         "euler_number": int(tm.euler_number),
         "min_angle_deg": float(angles),
+        "caps": caps,
+        "caps_are_discs": all(bool(c["disc"]) for c in caps.values()),
     }
     out["closed"] = bool(
-        out["watertight"] and out["winding_consistent"] and out["volume_mm3"] > 0 and out["euler_number"] == 2
+        out["watertight"]
+        and out["winding_consistent"]
+        and out["volume_mm3"] > 0
+        and out["euler_number"] == 2
+        and out["caps_are_discs"]
     )
     return out
 
