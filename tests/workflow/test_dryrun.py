@@ -283,11 +283,30 @@ def test_half_given_ends_fail_with_one_line(cohort):
 @pytest.mark.parametrize(
     "cells, expected",
     [
-        ({"cell_size_mm": "fine"}, "cell_size_mm 'fine' is not a number (or auto)"),
-        ({"cell_size_mm": "0.01"}, "cell_size_mm 0.01 must be auto or a number of mm in [0.05, 50]"),
-        ({"flow_rate_l_min": "-2"}, "flow_rate_l_min: -2.0 is less than or equal to the minimum of 0"),
+        ({"cell_size_mm": "fine"}, "cell_size_mm 'fine' is not a number; give auto or a number in [0.05, 50] mm"),
+        ({"cell_size_mm": "0.01"}, "cell_size_mm '0.01' is out of range; give auto or a number in [0.05, 50] mm"),
+        ({"cell_size_mm": "nan"}, "cell_size_mm 'nan' is out of range"),
+        ({"cell_size_mm": "inf"}, "cell_size_mm 'inf' is out of range"),
+        ({"flow_rate_l_min": "-2"}, "flow_rate_l_min '-2' is out of range; give a number in (0, 50] L/min"),
+        ({"flow_rate_l_min": "-1"}, "flow_rate_l_min '-1' is out of range"),
+        ({"flow_rate_l_min": "0"}, "flow_rate_l_min '0' is out of range"),
+        ({"flow_rate_l_min": "nan"}, "flow_rate_l_min 'nan' is out of range"),
+        ({"flow_rate_l_min": "NaN"}, "flow_rate_l_min 'NaN' is out of range"),
+        ({"flow_rate_l_min": "inf"}, "flow_rate_l_min 'inf' is out of range"),
+        ({"flow_rate_l_min": "1e9"}, "flow_rate_l_min '1e9' is out of range"),
+        ({"flow_rate_l_min": "abc"}, "flow_rate_l_min 'abc' is not a number; give a number in (0, 50] L/min"),
         ({"flow_rate_l_min": "5 L/min"}, "flow_rate_l_min '5 L/min' is not a number"),
-        ({"flow_rate_l_min": "80"}, "flow_rate_l_min: 80.0 is greater than the maximum of 50"),
+        ({"flow_rate_l_min": "80"}, "flow_rate_l_min '80' is out of range"),
+        (
+            {"inlet_velocity_m_s": "nan", "valve_area_cm2": "1"},
+            "inlet_velocity_m_s 'nan' is out of range; give a number in (0, 10] m/s",
+        ),
+        (
+            {"inlet_velocity_m_s": "1.2", "valve_area_cm2": "-inf"},
+            "valve_area_cm2 '-inf' is out of range; give a number in (0, 50] cm2",
+        ),
+        ({"inlet_velocity_m_s": "1e9", "valve_area_cm2": "1"}, "inlet_velocity_m_s '1e9' is out of range"),
+        ({"inlet_velocity_m_s": "1.2", "valve_area_cm2": "abc"}, "valve_area_cm2 'abc' is not a number"),
         ({"inlet_velocity_m_s": "1.2"}, "the inflow needs both inlet_velocity_m_s and valve_area_cm2"),
         ({"valve_area_cm2": "1"}, "the inflow needs both inlet_velocity_m_s and valve_area_cm2"),
         (
@@ -313,6 +332,21 @@ def test_bad_config_value_fails_with_one_line(cohort):
     cohort.update_config("cfd", "ranks", 0)
     msg = _one_line_error(cohort)
     assert "cfd > ranks" in msg and "minimum of 1" in msg
+
+
+@pytest.mark.parametrize(
+    ("keys", "value"),
+    [
+        (("cfd", "inlet", "flow_rate"), float("nan")),
+        (("cfd", "mesh", "layer_expansion"), float("inf")),
+        (("wall", "extend_outlet"), float("nan")),
+    ],
+)
+def test_non_finite_config_number_fails_with_one_line(cohort, keys, value):
+    """A YAML `.nan` passes every minimum and maximum of the schema: it is refused by name."""
+    cohort.update_config(*keys, value)
+    msg = _one_line_error(cohort)
+    assert " > ".join(keys) in msg and "is not a finite number" in msg, msg
 
 
 @pytest.mark.parametrize(

@@ -4,6 +4,7 @@
 import csv
 import hashlib
 import json
+import math
 import os
 import re
 import shlex
@@ -57,6 +58,22 @@ def _validation_message(exc):
 
 # --------------------------------------------------------------------------- config
 
+def _non_finite(value, where=()):
+    """The first (path, value) of a NaN or infinite number anywhere in the configuration
+    (`.nan` and `.inf` are YAML numbers, and a NaN passes every minimum and maximum)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return where, value
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        found = _non_finite(item, (*where, str(key)))
+        if found:
+            return found
+    return None
+
+
+_bad = _non_finite(config)
+if _bad:
+    fail(f"invalid configuration ({' > '.join(_bad[0])}: {_bad[1]} is not a finite number); see config/config.yaml")
 try:
     validate(config, schema="../schemas/config.schema.yaml")
 except WorkflowError as exc:
@@ -110,6 +127,43 @@ def _check_file(path, sheet, n, pid, column):
         fail(f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{path}' not found (paths are relative to {os.getcwd()})")
 
 
+def _number_range(column):
+    """(lowest, highest, lowest excluded, also `auto`, unit) of a number column of the patients
+    sheet, read from workflow/schemas/patients.schema.yaml (the one place that sets them)."""
+    import yaml
+
+    global _PATIENT_SCHEMA
+    if _PATIENT_SCHEMA is None:
+        _PATIENT_SCHEMA = yaml.safe_load((Path(workflow.basedir) / "workflow/schemas/patients.schema.yaml").read_text())
+    prop = _PATIENT_SCHEMA["properties"][column]
+    auto = any(alt.get("const") == "auto" for alt in prop.get("oneOf", []))
+    num = next((alt for alt in prop.get("oneOf", []) if alt.get("type") == "number"), prop)
+    low = num.get("exclusiveMinimum", num.get("minimum"))
+    return low, num.get("maximum"), "exclusiveMinimum" in num, auto, column.rsplit("_", 1)[-1] if "_" in column else ""
+
+
+_PATIENT_SCHEMA = None
+_UNITS = {"mm": "mm", "min": "L/min", "s": "m/s", "cm2": "cm2"}
+
+
+def _sheet_number(text, column, where):
+    """A number cell of the patients sheet as a float (or "auto" where the column allows it),
+    checked to be finite and in the schema's range: nan, inf, -1, 1e9 or abc stop the plan with
+    one line naming the patient, the column and the value."""
+    low, high, open_low, auto, unit = _number_range(column)
+    if auto and text == "auto":
+        return text
+    interval = f"{'(' if open_low else '['}{low:g}, {high:g}] {_UNITS.get(unit, unit)}".rstrip()
+    want = f"{'auto or ' if auto else ''}a number in {interval}"
+    try:
+        value = float(text)
+    except ValueError:
+        fail(f"{where}: {column} '{text}' is not a number; give {want}")
+    if not math.isfinite(value) or value < low or (open_low and value == low) or value > high:
+        fail(f"{where}: {column} '{text}' is out of range; give {want}")
+    return value
+
+
 def load_patients(sheet):
     """{id: row} of the patients sheet, validated; empty cells become None; units default to auto."""
     patients, first_line = {}, {}
@@ -125,14 +179,8 @@ def load_patients(sheet):
         first_line[pid] = n
         record = {k: v for k, v in row.items() if v != ""}
         for column in PATIENT_CFD_COLUMNS:
-            if column in record and not (column == "cell_size_mm" and record[column] == "auto"):
-                try:
-                    record[column] = float(record[column])
-                except ValueError:
-                    fail(
-                        f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{record[column]}' is not a number"
-                        + (" (or auto)" if column == "cell_size_mm" else "")
-                    )
+            if column in record:
+                record[column] = _sheet_number(record[column], column, f"patients sheet '{sheet}' line {n} (id {pid})")
         try:
             validate(record, schema="../schemas/patients.schema.yaml")
         except WorkflowError as exc:
