@@ -381,10 +381,11 @@ def test_a_crash_while_writing_a_fit_leaves_the_earlier_fit_whole(fitted, tmp_pa
     assert sorted(after) == sorted(before) and after["model.json"] != before["model.json"]
 
 
-def test_a_failed_refit_removes_the_stale_fit_and_says_so(fitted, tmp_path):
-    """A fit, then a failed refit into the same folder: the earlier model.json & co. are removed
-    and fit_failed.json holds the error and what was removed; a later good fit removes the record.
-    A file the earlier run wrote but the new run does not (residual_map.png) does not survive."""
+def test_a_failed_refit_keeps_the_earlier_fit_and_says_so(fitted, tmp_path):
+    """Issue 22: a fit, then a failed refit into the same folder: the earlier model.json & co. are
+    kept byte for byte (still usable: `vcs wall` takes them) and fit_failed.json holds the error
+    and what was kept; a later good fit removes the record. A file the earlier run wrote but the
+    new run does not (residual_map.png) does not survive a successful run."""
     _, mesh, _ = fitted
     out = tmp_path / "fit"
     r = run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7", "--residual-png")
@@ -395,14 +396,58 @@ def test_a_failed_refit_removes_the_stale_fit_and_says_so(fitted, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == sorted(set(outputs) - {"residual_map.png"})
     r = run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7", "--residual-png")
     assert r.returncode == 0, r.stderr
+    before = snapshot(out)
     r = run("fit", mesh, "-o", out, "--units", "cm", "--inlet", "0,0,5", "--outlet", "0,0,5.01")
     msg = one_line_error(r, "vcs fit: error:")
-    assert sorted(p.name for p in out.iterdir()) == ["fit_failed.json"]
-    record = json.loads((out / "fit_failed.json").read_text())
-    assert record["error"] in msg and sorted(record["removed_stale_outputs"]) == outputs
+    after = snapshot(out)
+    assert {n: b for n, b in after.items() if n != "fit_failed.json"} == before
+    record = json.loads(after["fit_failed.json"])
+    assert record["error"] in msg and record["kept_earlier_outputs"] == outputs
+    assert run("wall", out / "model.json", "-o", tmp_path / "w.stl").returncode == 0  # still usable
     r = run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7")
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in out.iterdir()) == sorted(set(outputs) - {"residual_map.png"})
+
+
+@pytest.mark.parametrize(("sig", "code"), [("SIGINT", 130), ("SIGTERM", 143), ("SIGKILL", -9)])
+def test_an_interrupted_refit_keeps_the_earlier_fit_whole(tmp_path, sig, code):
+    """Issue 22: Ctrl-C, SIGTERM (scancel, Snakemake) or SIGKILL (the out-of-memory killer) while
+    a refit into a folder holding a good fit runs: every earlier file is still there byte for byte
+    and `vcs wall` takes it; Ctrl-C and SIGTERM say so in one line and leave no temporary folder,
+    a killed run's temporary folder is removed by the next run."""
+    import signal
+    import time
+
+    from vcs.phantoms import make_phantom, write_stl
+
+    write_stl(make_phantom("aorta", seed=0, resolution=1.0), tmp_path / "aorta.stl")  # ~2-4 s to fit
+    out = tmp_path / "fit"
+    assert run("fit", tmp_path / "aorta.stl", "-o", out, "--K", "11").returncode == 0
+    before = snapshot(out)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "vcs.cli", "fit", str(tmp_path / "aorta.stl"), "-o", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 120
+    while not any(n.name.startswith(".fit.") for n in out.iterdir()) and p.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    time.sleep(0.5)  # inside the fit
+    assert p.poll() is None, "the refit ended before the signal"
+    p.send_signal(getattr(signal, sig))
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == code, (p.returncode, err)
+    if sig != "SIGKILL":
+        one_line_error(subprocess.CompletedProcess(p.args, p.returncode, "", err), "earlier outputs kept", code=code)
+        assert snapshot(out) == before
+    else:
+        assert {n: b for n, b in snapshot(out).items() if not n.startswith(".")} == before
+    assert run("wall", out / "model.json", "-o", tmp_path / "w.stl").returncode == 0
+    assert run("fit", tmp_path / "aorta.stl", "-o", out, "--K", "11").returncode == 0
+    assert sorted(snapshot(out)) == sorted(before)  # the dead run's temporary folder is gone
 
 
 def test_a_failed_fit_into_a_new_folder_leaves_nothing(tmp_path):
@@ -411,15 +456,19 @@ def test_a_failed_fit_into_a_new_folder_leaves_nothing(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.stl"]
 
 
-def test_a_failed_sweep_removes_the_stale_sweep(fitted, tmp_path):
+def test_a_failed_sweep_keeps_the_earlier_sweep(fitted, tmp_path):
     _, mesh, _ = fitted
     out = tmp_path / "s"
     argv = ["sensitivity", mesh, "--units", "cm", "--L", "5", "--K", "5", "--R", "5", "-o", out]
     assert run(*argv).returncode == 0
-    assert sorted(p.name for p in out.iterdir()) == ["sensitivity.csv", "sensitivity.png"]
+    before = snapshot(out)
+    assert sorted(before) == ["sensitivity.csv", "sensitivity.png"]
     (tmp_path / "empty.stl").write_bytes(b"")
     one_line_error(run(*argv[:1], tmp_path / "empty.stl", *argv[2:]), "empty")
-    assert sorted(p.name for p in out.iterdir()) == ["sensitivity_failed.json"]
+    after = snapshot(out)
+    assert sorted(after) == ["sensitivity.csv", "sensitivity.png", "sensitivity_failed.json"]
+    assert {n: after[n] for n in before} == before
+    assert json.loads(after["sensitivity_failed.json"])["kept_earlier_outputs"] == sorted(before)
 
 
 def test_an_input_inside_the_output_folder_is_never_removed(fitted, tmp_path):

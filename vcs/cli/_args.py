@@ -16,7 +16,10 @@ import math
 import os
 import re
 import secrets
+import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -404,15 +407,17 @@ def atomic_file(path: Path) -> Iterator[Path]:
 class OutputFolder:
     """The outputs of a command that writes several files into one directory (`vcs fit`, `vcs sensitivity`).
 
-    Used as a context manager around the whole computation. Files are written to temporary names
-    (:meth:`file`) and renamed into place together when the block succeeds, in the order of
-    ``names`` (put the file whose presence means "complete" last, e.g. ``model.json``); outputs of
-    an earlier run that this run did not write (e.g. ``residual_map.png`` without
-    ``--residual-png``) and an earlier failure record are removed. When the block fails, the
-    temporary files are removed and so are the outputs of an earlier run (stale: they no longer
-    match what was asked), and ``<command>_failed.json`` (the command line, the error, the files
-    removed) is written in their place, so nothing looks complete when it is not; a directory
-    this run created is removed again when it is left empty.
+    Used as a context manager around the whole computation. The files are built in a hidden
+    temporary folder inside the directory (:meth:`file`) and moved into place together when the
+    block succeeds, in the order of ``names`` (put the file whose presence means "complete"
+    last, e.g. ``model.json``), with Ctrl-C and SIGTERM held back for those few renames; outputs
+    of an earlier run that this run did not write (e.g. ``residual_map.png`` without
+    ``--residual-png``) and an earlier failure record are then removed. Nothing the user had is
+    touched before that: when the block fails (an error, Ctrl-C, SIGTERM, out of memory) or the
+    process is killed, the temporary folder goes (a killed run's is removed by the next run) and
+    the outputs of an earlier run stay whole and usable. After an error (not an interruption),
+    ``<command>_failed.json`` (the command line's error and the earlier outputs kept) says that
+    the last run failed and what is still there; a directory this run created is removed again.
 
     Parameters
     ----------
@@ -431,6 +436,7 @@ class OutputFolder:
         self.command = command
         self._staged: dict[str, Path] = {}
         self._created = False
+        self._stage: Path | None = None
 
     def __enter__(self) -> OutputFolder:
         try:
@@ -439,14 +445,18 @@ class OutputFolder:
                 self.path.mkdir()
             for name in self.names:
                 remove_leftovers(self.path / name)
+            _remove_dead_stages(self.path, self.command)
+            self._stage = self.path / f".{self.command}.{os.getpid()}-{secrets.token_hex(4)}.tmp"
+            self._stage.mkdir()
         except BaseException:  # Ctrl-C right after mkdir: __exit__ would not run
+            self._discard()
             if self._created and self.path.is_dir() and not any(self.path.iterdir()):
                 self.path.rmdir()
             raise
         return self
 
     def file(self, name: str) -> Path:
-        """The temporary path to write output ``name`` to (renamed into place on success).
+        """The temporary path to write output ``name`` to (moved into place on success).
 
         Parameters
         ----------
@@ -456,11 +466,12 @@ class OutputFolder:
         Returns
         -------
         Path
-            A hidden file in the directory with the extension of ``name``.
+            ``name`` in the hidden temporary folder.
         """
         if name not in self.names:
             raise ValueError(f"{name} is not an output of vcs {self.command}")
-        self._staged[name] = _temporary_name(self.path / name)
+        assert self._stage is not None
+        self._staged[name] = self._stage / name
         return self._staged[name]
 
     def __exit__(
@@ -471,37 +482,65 @@ class OutputFolder:
             if missing:
                 self._discard()
                 raise RuntimeError(f"vcs {self.command} did not write {', '.join(missing)}")
-            for name in self.names:
-                if name in self._staged:
-                    os.replace(self._staged[name], self.path / name)
-                else:
-                    (self.path / name).unlink(missing_ok=True)  # an earlier run's, not this one's
-            self.record.unlink(missing_ok=True)
+            with _signals_held():
+                for name in self.names:
+                    if name in self._staged:
+                        os.replace(self._staged[name], self.path / name)
+                    else:
+                        (self.path / name).unlink(missing_ok=True)  # an earlier run's, not this one's
+                self.record.unlink(missing_ok=True)
+            self._discard()
             return
         self._discard()
-        stale = [n for n in self.names if (self.path / n).is_file()]
-        for name in stale:
-            (self.path / name).unlink()
-        if stale or self.record.is_file():
-            if isinstance(exc, KeyboardInterrupt):
-                error = "interrupted (Ctrl-C)"
-            else:
-                error = str(exc) or type(exc).__name__
+        kept = sorted(n for n in self.names if (self.path / n).is_file())
+        if isinstance(exc, KeyboardInterrupt):  # Ctrl-C or SIGTERM: the user knows; nothing to record
+            pass
+        elif kept or not self._created:
             record = {
                 "command": f"vcs {self.command}",
-                "error": error,
-                "removed_stale_outputs": stale,
-                "note": f"vcs {self.command} failed; the outputs of an earlier run were removed (they no longer "
-                "match the inputs and options asked for)",
+                "error": str(exc) or type(exc).__name__,
+                "kept_earlier_outputs": kept,
+                "note": f"the last vcs {self.command} into this folder failed; "
+                + (
+                    "the outputs listed are an earlier run's, kept as they were (they do not reflect the "
+                    "failed command line)"
+                    if kept
+                    else "it wrote nothing"
+                ),
             }
             with atomic_file(self.record) as tmp:
                 write_json(tmp, record)
-        elif self._created and not any(self.path.iterdir()):
+        if self._created and self.path.is_dir() and not any(self.path.iterdir()):
             self.path.rmdir()
 
     def _discard(self) -> None:
-        for tmp in self._staged.values():
-            tmp.unlink(missing_ok=True)
+        if self._stage is not None:
+            shutil.rmtree(self._stage, ignore_errors=True)
+            self._stage = None
+
+
+def _remove_dead_stages(path: Path, command: str) -> None:
+    """Remove the temporary folders of :class:`OutputFolder` runs that died (killed, out of memory)."""
+    pattern = re.compile(re.escape(f".{command}.") + r"(\d+)-[0-9a-f]{8}\.tmp$")
+    with os.scandir(path) as entries:
+        for e in entries:
+            m = pattern.match(e.name)
+            if m is not None and e.is_dir(follow_symlinks=False) and not _process_exists(int(m.group(1))):
+                shutil.rmtree(e.path, ignore_errors=True)
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back (delivered on exit) around a few renames that belong together."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

@@ -23,9 +23,10 @@ OUTPUTS = ("centerline.vtp", "wall_residuals.vtp", "residual_map.png", "fit_repo
 def cmd_fit(args: argparse.Namespace) -> None:
     """Run `vcs fit`: model.json, fit_report.json, centerline.vtp, wall_residuals.vtp in ``args.output``.
 
-    The outputs are written to temporary files and put in place together when the fit succeeds
-    (model.json last); a failed fit into a folder holding an earlier fit removes that fit's files
-    and writes ``fit_failed.json`` instead (:class:`vcs.cli._args.OutputFolder`).
+    The outputs are built in a hidden temporary folder and put in place together when the fit
+    succeeds (model.json last); a failed or interrupted fit into a folder holding an earlier fit
+    leaves that fit whole and usable, and a failed one writes ``fit_failed.json`` beside it
+    (:class:`vcs.cli._args.OutputFolder`).
 
     Parameters
     ----------
@@ -126,8 +127,8 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "-o",
         "--output",
         required=True,
-        help="output directory (created if missing; its parent must exist); a failed fit removes an earlier "
-        "fit's files there and writes fit_failed.json",
+        help="output directory (created if missing; its parent must exist); a failed or interrupted fit keeps an "
+        "earlier fit there whole (a failed one writes fit_failed.json beside it)",
     )
     f.add_argument(
         "--units",

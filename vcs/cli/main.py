@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
+import threading
 import warnings
 from collections.abc import Sequence
 from typing import NoReturn
@@ -32,8 +34,8 @@ _COMMAND_GROUPS = (
     add_sensitivity_commands,
 )
 
-EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_MEMORY, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
-"""Exit codes of `vcs`: success, a bug (report it), bad input (fix it), out of memory, Ctrl-C."""
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_MEMORY, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
+"""Exit codes of `vcs`: success, a bug (report it), bad input (fix it), out of memory, Ctrl-C, SIGTERM."""
 
 # characters str.splitlines() breaks at: escaped so that an error is always one line
 _LINE_BREAKS = str.maketrans({c: repr(c)[1:-1] for c in "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"})
@@ -120,6 +122,22 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return args
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (scancel, Snakemake, kill) raised as an interruption, so that every ``finally`` and
+    context manager cleans up as for Ctrl-C (the earlier outputs kept, temporary files removed)."""
+
+
+def _terminate_as_interrupt() -> None:
+    """Make SIGTERM raise :class:`Terminated` in the main thread (the default would end the process
+    at once, leaving temporary files)."""
+
+    def handler(signum: int, frame: object) -> None:
+        raise Terminated()
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, handler)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the `vcs` command line.
 
@@ -136,10 +154,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         permissions, a full disk); 3 out of memory (one line; the input is not wrong, it is too
         big for this machine: coarsen the mesh or the grid, or use more memory); 1 internal
         error, a bug (one line; with ``-v`` the exception propagates with its traceback); 130
-        interrupted (Ctrl-C; temporary files removed). Invalid arguments (one line) and
+        interrupted (Ctrl-C; temporary files removed, earlier outputs kept); 143 terminated (SIGTERM, as
+        Ctrl-C). Invalid arguments (one line) and
         ``--help`` leave through argparse's ``SystemExit`` (codes 2 and 0).
     """
     args = parse_args(argv)
+    _terminate_as_interrupt()
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
@@ -163,9 +183,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             where = f" '{exc.filename}'" if exc.filename else ""
             print(one_line(f"{prefix}: error: cannot access{where}: {exc.strerror or exc}"), file=sys.stderr)
             return EXIT_INPUT
-        except KeyboardInterrupt:
-            print(f"{prefix}: interrupted; no partial output left behind", file=sys.stderr)
-            return EXIT_INTERRUPTED
+        except KeyboardInterrupt as exc:
+            what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
+            print(f"{prefix}: {what}; no partial output left behind, earlier outputs kept", file=sys.stderr)
+            return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
         except Exception as exc:  # a bug, not bad input: one line, the traceback only with -v
             if args.verbose:
                 raise

@@ -19,8 +19,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> None:
     args : argparse.Namespace
         ``meshes`` (surfaces whose two ends are found automatically), ``L``, ``K``, ``R`` (range
         strings ``a:b:s`` or ``a``), ``units`` and ``output`` (directory, created when missing; its
-        parent must exist). Both files are put in place when the sweep succeeds; a failed sweep
-        removes an earlier sweep's files there and writes ``sensitivity_failed.json``.
+        parent must exist). Both files are put in place when the sweep succeeds; a failed or
+        interrupted sweep leaves an earlier sweep's files whole (a failed one writes
+        ``sensitivity_failed.json`` beside them).
         Residuals are in mm.
 
     Raises
