@@ -22,6 +22,7 @@ include: "workflow/rules/case.smk"
 include: "workflow/rules/solve.smk"
 include: "workflow/rules/sample.smk"
 include: "workflow/rules/atlas.smk"
+include: "workflow/rules/keep.smk"
 include: "workflow/rules/provenance.smk"
 
 

@@ -186,7 +186,7 @@ def test_fixing_the_mesh_brings_the_patient_back_into_the_atlas(wd, prepared):
     assert (wd.path / "results" / "atlas" / "complete.txt").read_text().startswith("all 7 patients")
 
 
-def test_an_atlas_older_than_a_patient_result_is_removed(wd):
+def test_an_atlas_older_than_a_patient_result_is_moved_aside(wd):
     r = _run(wd, "--forcerun", "atlas_build")  # a real atlas of all seven
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
     assert _atlas(wd)["patients_included"] == IDS
@@ -195,7 +195,12 @@ def test_an_atlas_older_than_a_patient_result_is_removed(wd):
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
     atlas_dir = wd.path / "results" / "atlas"
     assert not (atlas_dir / "atlas.json").exists() and not (atlas_dir / "figures").exists()
-    assert "vcs-atlas: removed the atlas in results/atlas/" in r.stdout + r.stderr
+    assert "vcs-atlas: moved the atlas in results/atlas/ to results/previous/atlas/" in r.stdout + r.stderr
+    # nothing lost (issue 22): the old atlas and the patient's earlier fit are kept aside
+    assert json.loads((wd.path / "results" / "previous" / "atlas" / "atlas.json").read_text())["patients_included"] == IDS
+    earlier = wd.path / "results" / "patients" / FIT / "previous" / "fit" / "model.json"
+    assert "wall" in json.loads(earlier.read_text()) and f"{FIT} failed in this run" in r.stderr
+    assert json.loads((wd.path / "results" / "patients" / FIT / "fit" / "model.json").read_text())["failed"] is True
     r = _run(wd)  # the next full run builds it again, without the failed patient
     assert r.returncode != 0 and FIT not in _atlas(wd)["patients_included"]
 

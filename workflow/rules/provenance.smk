@@ -100,13 +100,13 @@ ATLAS_OUTPUTS = ("results/atlas/atlas.json", "results/atlas/atlas.npz", "results
 
 
 def drop_stale_atlas():
-    """After a run (onsuccess/onerror): remove an atlas that no longer matches its patients.
+    """After a run (onsuccess/onerror): move aside an atlas that no longer matches its patients.
 
     When a patient's job failed outright (interrupted, no OpenFOAM, a bug) or a run stopped at a
     patient's file, the atlas is not rebuilt; the old one would still list that patient as
     included. If any input of atlas_build is missing or newer than atlas.json, atlas.json,
-    atlas.npz, figures/ and complete.txt are removed (one line on stderr); the next run builds
-    the atlas again. Without atlas.json (atlas_build failed and Snakemake removed its outputs),
+    atlas.npz, figures/ and complete.txt are moved to results/previous/atlas/ (one line on
+    stderr; nothing the user had is lost); the next run builds the atlas again. Without atlas.json (atlas_build failed and Snakemake removed its outputs),
     what is left of an older atlas (complete.txt) goes too.
     """
     import shutil
@@ -125,29 +125,36 @@ def drop_stale_atlas():
         stale = [str(atlas)] if any(Path(out).exists() for out in ATLAS_OUTPUTS[1:]) else []
     if not stale:
         return
+    previous = Path("results") / "previous" / "atlas"  # nothing the user had is lost: moved aside
+    shutil.rmtree(previous, ignore_errors=True)
     for out in ATLAS_OUTPUTS:
-        if Path(out).is_dir():
-            shutil.rmtree(out, ignore_errors=True)
-        elif Path(out).exists():
-            Path(out).unlink()
+        if Path(out).exists():
+            (previous / Path(out).relative_to("results/atlas")).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(out, previous / Path(out).relative_to("results/atlas"))
     more = f" and {len(stale) - 1} more" if len(stale) > 1 else ""
     why = (
         f"it no longer matches the patients' results ({stale[0]}{more} missing or newer than atlas.json)"
         if had_atlas
         else "what was left of an older atlas (no atlas.json)"
     )
-    print(f"vcs-atlas: removed the atlas in results/atlas/: {why}; the next run builds it again", file=sys.stderr)
+    print(
+        f"vcs-atlas: moved the atlas in results/atlas/ to results/previous/atlas/: {why}; the next run builds it again",
+        file=sys.stderr,
+    )
 
 
 onstart:
     _RUN["start"] = datetime.datetime.now(datetime.timezone.utc)
+    keep_outputs()  # workflow/rules/keep.smk
 
 
 onsuccess:
+    settle_kept()
     write_provenance("success", log)
     drop_stale_atlas()
 
 
 onerror:
+    settle_kept()
     write_provenance("failed", log)
     drop_stale_atlas()

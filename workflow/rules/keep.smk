@@ -1,0 +1,160 @@
+# Nothing a user had is lost to an interrupted or failed rerun (issue 22).
+#
+# Snakemake removes a job's outputs before the job starts. So, before any job runs (onstart), every
+# existing output of the workflow's per-patient and atlas rules is kept aside as hard links (no
+# copy; the same bytes, mode and modification time) in .snakemake/vcs-kept/. After the run
+# (onsuccess/onerror, or at the next start when Snakemake itself was killed) each one is settled:
+#   * its job did not finish (Ctrl-C, SIGTERM, a kill, a failed job: the output is missing or
+#     marked incomplete by Snakemake): the earlier output is put back whole, with its old time
+#     stamp (the next run reruns the job, as before);
+#   * its job finished with a failure of this patient (a failure record, a failed or not converged
+#     status.json, placeholder fields) where the earlier output held a result: the earlier one is
+#     moved to results/patients/<id>/previous/ (the atlas never reads it);
+#   * otherwise (unchanged, or a new result) the hard link is dropped.
+# Each restore or move is said in one line on stderr.
+
+import shutil
+import zipfile
+
+KEEP_DIR = Path(".snakemake") / "vcs-kept"
+_KEEP_WILDCARD = re.compile(r"\{(\w+)(?:,[^{}]*)?\}")
+sys.path.insert(0, os.path.join(workflow.basedir, "workflow", "scripts"))
+import _failure  # noqa: E402  (standard library only)
+
+
+def kept_units():
+    """Every output path of the per-patient rules (for the sheet's patients) and of the atlas."""
+    units = []
+    for r in workflow.rules:
+        for pattern in r.output:
+            plain = _KEEP_WILDCARD.sub(r"{\1}", str(pattern))
+            names = set(_KEEP_WILDCARD.findall(plain))
+            if not names:
+                units.append(plain)
+            elif names == {"id"}:
+                units.extend(expand(plain, id=PATIENT_IDS))
+    return sorted(set(units))
+
+
+def _link_tree(src, dst):
+    """A mirror of ``src`` (file or directory) made of hard links (copies where links fail)."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    if src.is_dir():
+        shutil.copytree(src, dst, copy_function=_link_or_copy, symlinks=True)
+    else:
+        _link_or_copy(src, dst)
+
+
+def _link_or_copy(src, dst):
+    try:
+        os.link(src, dst)
+    except OSError:  # another file system, or links not allowed
+        shutil.copy2(src, dst)
+
+
+def _same(a, b):
+    """Is ``a`` still the output that was kept as ``b`` (the same files, not rewritten)?"""
+    try:
+        if a.is_dir() != b.is_dir():
+            return False
+        if not a.is_dir():
+            return os.path.samefile(a, b)
+        fa = sorted(p.relative_to(a) for p in a.rglob("*") if not p.is_dir())
+        fb = sorted(p.relative_to(b) for p in b.rglob("*") if not p.is_dir())
+        return fa == fb and all(os.path.samefile(a / f, b / f) for f in fa)
+    except OSError:
+        return False
+
+
+def is_failure(path):
+    """Does this output say that its patient failed (rather than hold a result)?"""
+    path = Path(path)
+    if path.is_dir():
+        return any((path / n).exists() for n in ("SETUP_FAILED.json", "FAILED.json"))
+    if not path.is_file():
+        return False
+    if _failure.read_record(path) is not None:
+        return True
+    if path.name in ("status.json", "fields.json"):
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return False
+        return bool(data.get("failed") or data.get("excluded") or data.get("converged") is False)
+    if path.suffix == ".npz":
+        try:
+            with zipfile.ZipFile(path) as z:
+                return "excluded.npy" in z.namelist()
+        except (OSError, zipfile.BadZipFile):
+            return False
+    return False
+
+
+def _patient_of(unit):
+    m = re.match(r"results/patients/([^/]+)/", unit)
+    return m.group(1) if m else None
+
+
+def _remove(path):
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+def keep_outputs():
+    """onstart: settle what a killed run left, then keep every existing output aside."""
+    settle_kept()
+    for unit in kept_units():
+        if Path(unit).exists():
+            _link_tree(Path(unit), KEEP_DIR / unit)
+
+
+def _incomplete(units):
+    """The units Snakemake marks as incomplete (a job started on them and did not finish)."""
+    try:
+        return set(workflow.persistence._filter_incomplete_keys(units))
+    except Exception:  # another Snakemake's persistence: a missing output still counts
+        return set()
+
+
+def settle_kept():
+    """onsuccess/onerror: put back, move to previous/ or drop each kept output (see the top)."""
+    if not KEEP_DIR.is_dir():
+        return
+    units = [u for u in kept_units() if (KEEP_DIR / u).exists()]
+    incomplete = _incomplete(units)
+    restored, failed_now, moved = [], {}, set()
+    replaced = [u for u in units if u not in incomplete and Path(u).exists() and not _same(Path(u), KEEP_DIR / u)]
+    for u in replaced:
+        if is_failure(u) and _patient_of(u):
+            failed_now[_patient_of(u)] = u
+    for u in units:
+        kept, out = KEEP_DIR / u, Path(u)
+        if u in incomplete or not out.exists():
+            _remove(out)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(kept, out)
+            restored.append(u)
+        elif u in replaced and _patient_of(u) in failed_now and not is_failure(kept):
+            pid = _patient_of(u)
+            dst = Path("results/patients") / pid / "previous" / Path(u).relative_to(f"results/patients/{pid}")
+            _remove(dst)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(kept, dst)
+            moved.add(pid)
+    shutil.rmtree(KEEP_DIR, ignore_errors=True)
+    if restored:
+        more = f" and {len(restored) - 1} more" if len(restored) > 1 else ""
+        print(
+            f"vcs-atlas: {len(restored)} output(s) of jobs that did not finish put back as they were before this "
+            f"run ({restored[0]}{more}); the next run recomputes them",
+            file=sys.stderr,
+        )
+    for pid, u in sorted(failed_now.items()):
+        if pid in moved:
+            print(
+                f"vcs-atlas: {pid} failed in this run ({u}); its earlier results are kept in "
+                f"results/patients/{pid}/previous/",
+                file=sys.stderr,
+            )
