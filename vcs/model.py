@@ -325,8 +325,9 @@ def _centerline_checks(
     Returns
     -------
     dict
-        ``centerline_min_wall_distance_mm`` (0 where the curve is outside the lumen),
-        ``centerline_min_wall_distance_ratio`` (dimensionless), ``centerline_inside_lumen``.
+        ``centerline_min_wall_distance_mm`` (0 where the curve is outside the lumen) and its
+        ``centerline_min_wall_distance_tau``, ``centerline_min_wall_distance_ratio``
+        (dimensionless), ``centerline_inside_lumen``.
     """
     from scipy.spatial import cKDTree
 
@@ -345,6 +346,7 @@ def _centerline_checks(
     ratio = lumen.distance_at(c_i) / ref_d[tree.query(c_i)[1]]
     return {
         "centerline_min_wall_distance_mm": float(d.min()),
+        "centerline_min_wall_distance_tau": float(tau[int(np.argmin(d))]),
         "centerline_min_wall_distance_ratio": float(ratio.min()),
         "centerline_inside_lumen": bool(inside.all() and d.min() > 0),
     }

@@ -593,20 +593,19 @@ def fit_vessel(
     if wall_fit is not None:
         report.update(wall_fit.report)
         report.update(wall_quality(wall_fit))
+    # every fit: does the surface cross itself, and where (0.45 s on a 61k-triangle aorta)
+    crossing = self_intersection_message(surf, report, vcs)
+    t_si = time.perf_counter()
+    if crossing:
+        warnings.append(crossing)
     report.update(fit_quality(report))
-    # a surface crossing itself shows as a poor fit, points outside Omega or not star-convex:
-    # only then is the (0.2-2 s) self-intersection test run
-    if report["quality"] == "poor" or report.get("points_not_used", {}).get("outside_omega"):
-        crossing = self_intersection_message(surf, report)
-        if crossing:
-            warnings.append(crossing)
-            report.update(fit_quality(report))
     report["timings_s"] = {
         "read_and_ends": t_read - t0,
         **vcs.report["timings_s"],
         "vcs_build": t_vcs - t_read,
         "wall_fit": t_wall - t_vcs,
-        "total": t_wall - t0,
+        "self_intersection": t_si - t_wall,
+        "total": t_si - t0,
     }
     meta = {
         "source_mesh": Path(str(surf.path)).name,
@@ -622,7 +621,9 @@ def fit_vessel(
     return model, report, wall_fit
 
 
-def self_intersection_message(surf: Surface, report: dict[str, Any] | None = None) -> str | None:
+def self_intersection_message(
+    surf: Surface, report: dict[str, Any] | None = None, vcs: VesselCoordinateSystem | None = None
+) -> str | None:
     """One line saying that (and where) the surface intersects itself, or None when it does not.
 
     Parameters
@@ -631,23 +632,51 @@ def self_intersection_message(surf: Surface, report: dict[str, Any] | None = Non
         The vessel's surface (mm).
     report : dict, optional
         Fit report: gains ``self_intersecting_triangles`` (a count, 0 when none), which
-        :func:`fit_quality` turns into a quality reason.
+        :func:`fit_quality` turns into a quality reason, and ``self_intersections``: one entry
+        per connected patch of crossing triangles (largest first, at most 10): ``triangles``,
+        ``center`` (mesh units) and, with ``vcs``, its vessel coordinates ``tau`` and
+        ``theta_deg`` (of the patch's centre) and, when the centerline leaves the lumen,
+        ``at_centerline_exit`` (the patch lies within 2.5 lumen radii of where it leaves: then
+        :func:`fit_quality` names the crossing as the cause).
+    vcs : VesselCoordinateSystem, optional
+        The fitted coordinate system (mm), to locate the patches.
 
     Returns
     -------
     str or None
     """
     crossing = self_intersections(surf.vertices, surf.faces)
+    patches: list[dict[str, Any]] = []
+    if len(crossing):
+        sub = surf.faces[crossing]
+        labels = np.unique(connected_faces(sub, len(surf.vertices)), return_inverse=True)[1]
+        sizes = np.bincount(labels)
+        for k in np.argsort(-sizes, kind="stable")[:10]:
+            centre = surf.vertices[sub[labels == k]].mean(axis=(0, 1))
+            patch: dict[str, Any] = {"triangles": int(sizes[k]), "center": (centre / surf.scale_to_mm).tolist()}
+            if vcs is not None:
+                tau, theta, _, _ = vcs.to_vcs(centre[None])
+                patch.update(tau=float(tau[0]), theta_deg=float(np.degrees(theta[0])))
+                exit_tau = vcs.report.get("centerline_min_wall_distance_tau")
+                if not vcs.report.get("centerline_inside_lumen", True) and exit_tau is not None:
+                    # where the centerline leaves the lumen: within 2.5 lumen radii of this patch?
+                    gap = float(np.linalg.norm(vcs.curve(exit_tau) - centre))
+                    radius = (report or {}).get("median_radius_mm") or surf.lumen_radius_mm or 0.0
+                    patch["at_centerline_exit"] = bool(gap <= 2.5 * radius)
+            patches.append(patch)
     if report is not None:
         report["self_intersecting_triangles"] = int(len(crossing))
+        report["self_intersections"] = patches
     if not len(crossing):
         return None
-    s = surf.scale_to_mm
-    c = surf.vertices[surf.faces[crossing]].mean(axis=(0, 1)) / s
+    c = np.asarray(patches[0]["center"])
+    where = f" (around ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}) {surf.units}"
+    if "tau" in patches[0]:
+        where += f", tau = {patches[0]['tau']:.3f}, theta = {patches[0]['theta_deg']:.0f} deg"
+    where += ")" if len(patches) == 1 else f"; {len(patches)} places, see self_intersections in fit_report.json)"
     return (
-        f"the surface intersects itself: {len(crossing)} triangles cross another part of the wall "
-        f"(around ({c[0]:.4g}, {c[1]:.4g}, {c[2]:.4g}) {surf.units}); the lumen, centerline and wall "
-        "model are not reliable there"
+        f"the surface intersects itself: {len(crossing)} triangles cross another part of the wall{where}; "
+        "the lumen, centerline and wall model are not reliable there"
     )
 
 
@@ -743,7 +772,17 @@ def fit_quality(report: dict[str, Any], limits: dict[str, float] | None = None) 
         )
     d = report["centerline_min_wall_distance_mm"]
     if not report["centerline_inside_lumen"]:
-        why.append(f"the centerline leaves the lumen (minimum wall distance {d:.3f} mm); use more knots (--L auto)")
+        tau_out = report.get("centerline_min_wall_distance_tau", float("nan"))
+        near = [p for p in report.get("self_intersections", []) if p.get("at_centerline_exit")]
+        if near:  # the crossing is the cause: more knots would not help
+            c = near[0]["center"]
+            why.append(
+                f"the centerline leaves the lumen at tau = {tau_out:.3f} (minimum wall distance {d:.3f} mm), where "
+                f"the surface intersects itself ({near[0]['triangles']} triangles around ({c[0]:.4g}, {c[1]:.4g}, "
+                f"{c[2]:.4g})): repair the mesh there (more knots would not help)"
+            )
+        else:
+            why.append(f"the centerline leaves the lumen (minimum wall distance {d:.3f} mm); use more knots (--L auto)")
     elif report["centerline_min_wall_distance_ratio"] < lim["min_centerline_wall_distance_ratio"]:
         pct = 100 * report["centerline_min_wall_distance_ratio"]
         why.append(

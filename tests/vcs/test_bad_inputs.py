@@ -281,6 +281,9 @@ def test_self_intersecting_tube_is_reported(tmp_path):
     assert rep["quality"] == "poor" and rep["self_intersecting_triangles"] > 0
     assert any("intersects itself" in q for q in rep["quality_reasons"])
     assert any("centerline leaves the lumen" in w for w in rep["warnings"])
+    # issue 22: the crossing is named as the cause, not a lack of knots
+    leaves = [q for q in rep["quality_reasons"] if q.startswith("the centerline leaves the lumen")]
+    assert leaves and "where the surface intersects itself" in leaves[0] and "more knots" not in leaves[0].split("(")[0]
     stderr = r.stderr.strip().splitlines()
     assert stderr == [f"warning: {w}" for w in rep["warnings"]], stderr
 

@@ -197,7 +197,9 @@ def test_an_atlas_older_than_a_patient_result_is_moved_aside(wd):
     assert not (atlas_dir / "atlas.json").exists() and not (atlas_dir / "figures").exists()
     assert "vcs-atlas: moved the atlas in results/atlas/ to results/previous/atlas/" in r.stdout + r.stderr
     # nothing lost (issue 22): the old atlas and the patient's earlier fit are kept aside
-    assert json.loads((wd.path / "results" / "previous" / "atlas" / "atlas.json").read_text())["patients_included"] == IDS
+    assert (
+        json.loads((wd.path / "results" / "previous" / "atlas" / "atlas.json").read_text())["patients_included"] == IDS
+    )
     earlier = wd.path / "results" / "patients" / FIT / "previous" / "fit" / "model.json"
     assert "wall" in json.loads(earlier.read_text()) and f"{FIT} failed in this run" in r.stderr
     assert json.loads((wd.path / "results" / "patients" / FIT / "fit" / "model.json").read_text())["failed"] is True
