@@ -201,7 +201,7 @@ def test_an_atlas_older_than_a_patient_result_is_moved_aside(wd):
         json.loads((wd.path / "results" / "previous" / "atlas" / "atlas.json").read_text())["patients_included"] == IDS
     )
     earlier = wd.path / "results" / "patients" / FIT / "previous" / "fit" / "model.json"
-    assert "wall" in json.loads(earlier.read_text()) and f"{FIT} failed in this run" in r.stderr
+    assert "wall" in json.loads(earlier.read_text()) and f"failed: {FIT} (" in r.stderr
     assert json.loads((wd.path / "results" / "patients" / FIT / "fit" / "model.json").read_text())["failed"] is True
     r = _run(wd)  # the next full run builds it again, without the failed patient
     assert r.returncode != 0 and FIT not in _atlas(wd)["patients_included"]

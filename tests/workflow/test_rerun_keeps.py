@@ -74,13 +74,13 @@ def test_an_interrupted_rerun_puts_every_earlier_output_back(tmp_path, how):
     now = _outputs(wd)
     if how.startswith("SIGINT"):  # the fit stops at once: its earlier outputs are put back
         assert now == before, err[-3000:]
-        assert "put back as they were before this run" in err
+        assert "of interrupted jobs put back as they were before this run" in err
     elif how.startswith("SIGKILL"):  # nothing runs after a kill: the next run settles first
         assert (wd.path / ".snakemake" / "vcs-kept").is_dir()
         assert not (wd.path / "results" / "patients" / IDS[0] / "fit" / "model.json").exists()
         wd.snakemake("--unlock")
         r = wd.snakemake("-c1", "--rerun-incomplete", *TARGETS)
-        assert "put back as they were before this run" in r.stderr
+        assert "of interrupted jobs put back as they were before this run" in r.stderr
         return
     else:  # Snakemake lets the running fit finish, then stops: a whole new fit, the earlier wall
         assert "Will exit after finishing currently running jobs" in err

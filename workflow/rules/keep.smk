@@ -4,12 +4,12 @@
 # existing output of the workflow's per-patient and atlas rules is kept aside as hard links (no
 # copy; the same bytes, mode and modification time) in .snakemake/vcs-kept/. After the run
 # (onsuccess/onerror, or at the next start when Snakemake itself was killed) each one is settled:
-#   * its job did not finish (Ctrl-C, SIGTERM, a kill, a failed job: the output is missing or
-#     marked incomplete by Snakemake): the earlier output is put back whole, with its old time
-#     stamp (the next run reruns the job, as before);
-#   * its job finished with a failure of this patient (a failure record, a failed or not converged
-#     status.json, placeholder fields) where the earlier output held a result: the earlier one is
-#     moved to results/patients/<id>/previous/ (the atlas never reads it);
+#   * its job was interrupted (Ctrl-C, a kill: Snakemake still marks the output incomplete): the
+#     earlier output is put back whole, with its old time stamp; the next run reruns the job;
+#   * its job failed (Snakemake removed the output and its record) or finished with a failure of
+#     this patient (a failure record, a failed or not converged status.json, placeholder fields)
+#     where the earlier output held a result: the earlier one is moved to previous/
+#     (results/patients/<id>/previous/..., results/previous/atlas/...; the atlas never reads it);
 #   * otherwise (unchanged, or a new result) the hard link is dropped.
 # Each restore or move is said in one line on stderr.
 
@@ -118,43 +118,57 @@ def _incomplete(units):
         return set()
 
 
+def previous_path(unit):
+    """Where an earlier output is kept when a rerun replaced it by a failure."""
+    rel = Path(unit).relative_to("results") if unit.startswith("results/") else Path(unit)
+    if rel.parts[:1] == ("patients",) and len(rel.parts) > 2:
+        return Path("results", *rel.parts[:2], "previous", *rel.parts[2:])
+    return Path("results", "previous", *rel.parts)
+
+
+def move_to_previous(src, unit):
+    dst = previous_path(unit)
+    _remove(dst)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(src, dst)
+    return dst
+
+
 def settle_kept():
     """onsuccess/onerror: put back, move to previous/ or drop each kept output (see the top)."""
     if not KEEP_DIR.is_dir():
         return
     units = [u for u in kept_units() if (KEEP_DIR / u).exists()]
     incomplete = _incomplete(units)
-    restored, failed_now, moved = [], {}, set()
+    restored, moved, failed_now = [], [], {}
     replaced = [u for u in units if u not in incomplete and Path(u).exists() and not _same(Path(u), KEEP_DIR / u)]
     for u in replaced:
         if is_failure(u) and _patient_of(u):
             failed_now[_patient_of(u)] = u
     for u in units:
         kept, out = KEEP_DIR / u, Path(u)
-        if u in incomplete or not out.exists():
+        if u in incomplete:  # interrupted: the earlier output goes back in place
             _remove(out)
             out.parent.mkdir(parents=True, exist_ok=True)
             os.replace(kept, out)
             restored.append(u)
+        elif not out.exists():  # its job failed: Snakemake removed the output and its record
+            moved.append(str(move_to_previous(kept, u)))
         elif u in replaced and _patient_of(u) in failed_now and not is_failure(kept):
-            pid = _patient_of(u)
-            dst = Path("results/patients") / pid / "previous" / Path(u).relative_to(f"results/patients/{pid}")
-            _remove(dst)
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(kept, dst)
-            moved.add(pid)
+            moved.append(str(move_to_previous(kept, u)))
     shutil.rmtree(KEEP_DIR, ignore_errors=True)
     if restored:
         more = f" and {len(restored) - 1} more" if len(restored) > 1 else ""
         print(
-            f"vcs-atlas: {len(restored)} output(s) of jobs that did not finish put back as they were before this "
-            f"run ({restored[0]}{more}); the next run recomputes them",
+            f"vcs-atlas: {len(restored)} output(s) of interrupted jobs put back as they were before this run "
+            f"({restored[0]}{more}); the next run recomputes them",
             file=sys.stderr,
         )
-    for pid, u in sorted(failed_now.items()):
-        if pid in moved:
-            print(
-                f"vcs-atlas: {pid} failed in this run ({u}); its earlier results are kept in "
-                f"results/patients/{pid}/previous/",
-                file=sys.stderr,
-            )
+    if moved:
+        more = f" and {len(moved) - 1} more" if len(moved) > 1 else ""
+        who = ", ".join(f"{pid} ({u})" for pid, u in sorted(failed_now.items()))
+        print(
+            f"vcs-atlas: {len(moved)} earlier output(s) replaced by a failure in this run kept in previous/ "
+            f"({moved[0]}{more})" + (f"; failed: {who}" if who else ""),
+            file=sys.stderr,
+        )

@@ -109,8 +109,6 @@ def drop_stale_atlas():
     stderr; nothing the user had is lost); the next run builds the atlas again. Without atlas.json (atlas_build failed and Snakemake removed its outputs),
     what is left of an older atlas (complete.txt) goes too.
     """
-    import shutil
-
     atlas = Path(ATLAS_OUTPUTS[0])
     had_atlas = atlas.is_file()
     if had_atlas:
@@ -125,12 +123,9 @@ def drop_stale_atlas():
         stale = [str(atlas)] if any(Path(out).exists() for out in ATLAS_OUTPUTS[1:]) else []
     if not stale:
         return
-    previous = Path("results") / "previous" / "atlas"  # nothing the user had is lost: moved aside
-    shutil.rmtree(previous, ignore_errors=True)
-    for out in ATLAS_OUTPUTS:
+    for out in ATLAS_OUTPUTS:  # nothing the user had is lost: moved aside (workflow/rules/keep.smk)
         if Path(out).exists():
-            (previous / Path(out).relative_to("results/atlas")).parent.mkdir(parents=True, exist_ok=True)
-            os.replace(out, previous / Path(out).relative_to("results/atlas"))
+            move_to_previous(Path(out), out)
     more = f" and {len(stale) - 1} more" if len(stale) > 1 else ""
     why = (
         f"it no longer matches the patients' results ({stale[0]}{more} missing or newer than atlas.json)"
