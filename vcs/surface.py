@@ -218,6 +218,11 @@ def wall_mesh(
     for tau_e, ext, sign in ((0.0, extend_inlet, -1.0), (1.0, extend_outlet, 1.0)):
         t, v1, v2 = vcs.frame(np.array([tau_e]))
         rw = model.wall(np.full(n_theta, tau_e), theta)
+        if rw.min() <= 0:  # the section would pass through the centerline: a fold, not a cap problem
+            raise VCSInputError(
+                f"the wall model's radius is {rw.min():.3g} mm at tau = {tau_e:.0f} (it must be positive): the wall "
+                "would fold through the centerline; check fit_report.json and refit"
+            )
         section = vcs.curve(tau_e) + rw[:, None] * (np.cos(theta)[:, None] * v1 + np.sin(theta)[:, None] * v2)
         length = ext * 2.0 * rw.mean()
         n_ext = int(round(length / step)) if ext > 0 else 0
