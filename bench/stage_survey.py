@@ -86,9 +86,9 @@ def row(res: Path, pid: str, atlas: dict) -> str:
     wall = (p / "wall" / "wall.stl").read_bytes()[:200]
     wall_ok = "refused" if wall.lstrip().startswith(b"{") else "closed"
     st = json.loads((p / "status.json").read_text())
-    cfd = st.get("criterion") or st.get("reason", "")[:80]
+    cfd = (st.get("reason") or "")[:80]
     if st.get("converged"):
-        cfd = f"converged ({cfd}, {st.get('iterations')} iterations)"
+        cfd = f"converged: {st.get('criterion_used')}, {st.get('iterations')} iterations"
     if pid in atlas.get("patients_included", []):
         stage = "atlas"
     else:

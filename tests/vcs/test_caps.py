@@ -170,13 +170,32 @@ def test_regression_concave_outlet_section_gives_a_closed_wall(seed, tmp_path, c
     assert "closed, volume" in capsys.readouterr().out
 
 
-def test_a_cap_problem_is_never_called_a_fold(tmp_path, capsys):
-    """A wall whose cap is broken (one cap triangle removed) is reported as a cap defect of ours,
-    not as a fold of the wall model."""
+def test_a_cap_problem_is_never_called_a_fold(tmp_path, capsys, monkeypatch):
+    """A wall whose cap is broken is reported as a cap defect of ours, never as a fold of the
+    wall model: check_closed finds the broken cap (one cap triangle removed), and `vcs wall`,
+    with a triangulation that loses a triangle, says 'defect of `vcs wall`' in one line."""
+    import triangle
+
+    from vcs.cli import main
     from vcs.surface import WallMesh
 
-    w = wall_mesh(lobed_end_model(21), n_theta=32)
+    model = lobed_end_model(21)
+    w = wall_mesh(model, n_theta=32)
     first_outlet = int(np.flatnonzero(w.solid == 2)[0])
     keep = np.arange(len(w.faces)) != first_outlet
     c = check_closed(WallMesh(w.vertices, w.faces[keep], w.solid[keep]))
     assert not c["closed"] and not c["caps"]["outlet"]["disc"] and c["caps"]["inlet"]["disc"]
+
+    real = triangle.triangulate
+
+    def losing_one(*args, **kwargs):
+        out = dict(real(*args, **kwargs))
+        out["triangles"] = out["triangles"][1:]
+        return out
+
+    model.save(tmp_path / "model.json")
+    monkeypatch.setattr(triangle, "triangulate", losing_one)
+    assert main(["wall", str(tmp_path / "model.json"), "-o", str(tmp_path / "w.stl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "could not be closed by a flat cap" in err[0] and "defect of `vcs wall`" in err[0], err
+    assert "folds" not in err[0] and not (tmp_path / "w.stl").exists()

@@ -1,7 +1,8 @@
 """The `vcs` command line on bad arguments and bad output paths (issue 14, part B): no abbreviated
 options, -v anywhere, range-checked numbers, output paths checked before any work (exit 2, one
-line, nothing written), out of memory exit 3, atomic outputs, stale outputs of a failed rerun
-removed with a failure record, inputs never overwritten, wall/grid in the model's units.
+line, nothing written), out of memory exit 3, atomic outputs, earlier outputs kept whole through
+a failed or interrupted rerun (with a failure record), inputs never overwritten, wall/grid in
+the model's units.
 
 The large matrices of argument and path errors run `vcs` in this process (vcs_in_process); what
 needs a real process (resource limits, a crash, the console script's exit) runs it as one."""
@@ -324,7 +325,7 @@ def test_out_of_memory_is_exit_3_not_bad_input(fitted, tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
-# 3. atomic outputs, stale outputs, inputs
+# 3. atomic outputs, earlier outputs kept, inputs
 
 
 def _limit_file_size():
@@ -473,7 +474,7 @@ def test_a_failed_sweep_keeps_the_earlier_sweep(fitted, tmp_path):
 
 def test_an_input_inside_the_output_folder_is_never_removed(fitted, tmp_path):
     """`vcs fit` whose cap file is one of the folder's output names: refused before anything is
-    touched (a failed fit removes stale outputs, never an input)."""
+    touched (the output folder never holds an input)."""
     _, mesh, _ = fitted
     out = tmp_path / "fit"
     assert run("fit", mesh, "-o", out, "--units", "cm", "--K", "7", "--R", "7").returncode == 0

@@ -321,6 +321,13 @@ def test_bad_patient_cfd_columns_fail_with_one_line(cohort, cells, expected):
     assert "line 4 (id P2)" in msg and expected in msg, msg
 
 
+@pytest.mark.parametrize("bad", ["e,e,e", "..,+,-", "1e999,0,0", "-1e400,2,3"])
+def test_sheet_point_that_is_not_three_finite_numbers_fails_with_one_line(cohort, bad):
+    cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": bad, "outlet": "0,0,1"}])
+    msg = _one_line_error(cohort)
+    assert f"inlet '{bad}' is not a point of three finite numbers" in msg and "(id P1)" in msg, msg
+
+
 @pytest.mark.parametrize("bad", ["2", "end:", "1,2", "cap 3"])
 def test_malformed_sheet_end_fails_with_one_line(cohort, bad):
     cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl", "inlet": bad, "outlet": "end:1"}])
@@ -332,6 +339,21 @@ def test_bad_config_value_fails_with_one_line(cohort):
     cohort.update_config("cfd", "ranks", 0)
     msg = _one_line_error(cohort)
     assert "cfd > ranks" in msg and "minimum of 1" in msg
+
+
+@pytest.mark.parametrize(
+    ("keys", "value"),
+    [
+        (("grid", "n_theta"), 10**9),
+        (("vcs", "K"), 10**9),
+        (("cfd", "mesh", "max_cells"), 10**12),
+        (("wall", "n_theta"), -1),
+    ],
+)
+def test_huge_or_negative_config_number_fails_with_one_line(cohort, keys, value):
+    cohort.update_config(*keys, value)
+    msg = _one_line_error(cohort)
+    assert " > ".join(keys) in msg and ("maximum" in msg or "minimum" in msg), msg
 
 
 @pytest.mark.parametrize(

@@ -4,7 +4,8 @@ argparse types for integer and float ranges, options whose value is a point (``-
 a value that starts with a minus sign), the output-path checks (a file or a directory whose parent
 exists and is writable, never an input overwritten), atomic writes (:func:`atomic_file`,
 :class:`OutputFolder`: a temporary file in the same directory, then :func:`os.replace`; a failed
-rerun into an output folder removes its stale outputs and leaves a failure record) and the JSON
+or interrupted rerun into an output folder keeps the earlier outputs whole, a failed one leaves a
+failure record beside them) and the JSON
 writer. Imports nothing from the rest of :mod:`vcs.cli`.
 """
 
@@ -298,7 +299,7 @@ def output_dir(path: PathLike, *inputs: PathLike | None, names: Sequence[str] = 
     *inputs : str, Path or None
         The command's inputs: none may be one of the files ``names`` in the directory.
     names : sequence of str
-        The files the command writes (or removes when stale) in the directory.
+        The files the command writes (or removes when a run no longer writes them) in the directory.
 
     Returns
     -------
@@ -482,14 +483,19 @@ class OutputFolder:
             if missing:
                 self._discard()
                 raise RuntimeError(f"vcs {self.command} did not write {', '.join(missing)}")
-            with _signals_held():
-                for name in self.names:
-                    if name in self._staged:
-                        os.replace(self._staged[name], self.path / name)
-                    else:
-                        (self.path / name).unlink(missing_ok=True)  # an earlier run's, not this one's
-                self.record.unlink(missing_ok=True)
-            self._discard()
+            try:
+                with _signals_held():
+                    for name in self.names:
+                        if name in self._staged:
+                            os.replace(self._staged[name], self.path / name)
+                        else:
+                            (self.path / name).unlink(missing_ok=True)  # an earlier run's, not this one's
+                    self.record.unlink(missing_ok=True)
+            except KeyboardInterrupt as interrupt:  # held back during the renames: the new outputs are whole
+                interrupt.after_outputs_complete = True  # type: ignore[attr-defined]
+                raise
+            finally:
+                self._discard()
             return
         self._discard()
         kept = sorted(n for n in self.names if (self.path / n).is_file())

@@ -17,7 +17,8 @@ from vcs.cli._args import (
 )
 
 OUTPUTS = ("centerline.vtp", "wall_residuals.vtp", "residual_map.png", "fit_report.json", "model.json")
-"""The files `vcs fit` writes (or removes when stale), in the order they are put in place: model.json last."""
+"""The files `vcs fit` writes (or removes when a run no longer writes them), in the order they are put in place:
+model.json last."""
 
 
 def cmd_fit(args: argparse.Namespace) -> None:

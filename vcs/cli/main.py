@@ -185,7 +185,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_INPUT
         except KeyboardInterrupt as exc:
             what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
-            print(f"{prefix}: {what}; no partial output left behind, earlier outputs kept", file=sys.stderr)
+            if getattr(exc, "after_outputs_complete", False):
+                print(f"{prefix}: {what} just after its outputs were complete; they are in place", file=sys.stderr)
+            else:
+                print(f"{prefix}: {what}; no partial output left behind, earlier outputs kept", file=sys.stderr)
             return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
         except Exception as exc:  # a bug, not bad input: one line, the traceback only with -v
             if args.verbose:

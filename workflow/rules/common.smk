@@ -153,6 +153,8 @@ def _sheet_number(text, column, where):
     low, high, open_low, auto, unit = _number_range(column)
     if auto and text == "auto":
         return text
+    low = -math.inf if low is None else low
+    high = math.inf if high is None else high
     interval = f"{'(' if open_low else '['}{low:g}, {high:g}] {_UNITS.get(unit, unit)}".rstrip()
     want = f"{'auto or ' if auto else ''}a number in {interval}"
     try:
@@ -202,6 +204,17 @@ def load_patients(sheet):
                     "`vcs ends`: end:N or NAME=VALUE"
                 )
             fail(f"patients sheet '{sheet}' line {n} (id {pid}): {msg}")
+        for column in ("inlet", "outlet"):  # a point: three finite numbers (the pattern admits "e,e,e")
+            if "," in record.get(column, ""):
+                try:
+                    xyz = [float(v) for v in record[column].split(",")]
+                except ValueError:
+                    xyz = []
+                if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+                    fail(
+                        f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{record[column]}' is not a point of "
+                        "three finite numbers x,y,z (mesh units); or give an end listed by `vcs ends`: end:N or NAME=VALUE"
+                    )
         for column in ("mesh", "inlet_cap", "outlet_cap"):
             if column in record:
                 _check_file(record[column], sheet, n, pid, column)

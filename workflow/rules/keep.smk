@@ -53,15 +53,23 @@ def _link_or_copy(src, dst):
 
 
 def _same(a, b):
-    """Is ``a`` still the output that was kept as ``b`` (the same files, not rewritten)?"""
+    """Is ``a`` still the output that was kept as ``b``: the same files, not rewritten (the same
+    inodes, or, where the keeping had to copy, the same sizes and modification times)?"""
+
+    def same_file(x, y):
+        if os.path.samefile(x, y):
+            return True
+        sx, sy = x.stat(), y.stat()
+        return sx.st_size == sy.st_size and sx.st_mtime_ns == sy.st_mtime_ns
+
     try:
         if a.is_dir() != b.is_dir():
             return False
         if not a.is_dir():
-            return os.path.samefile(a, b)
+            return same_file(a, b)
         fa = sorted(p.relative_to(a) for p in a.rglob("*") if not p.is_dir())
         fb = sorted(p.relative_to(b) for p in b.rglob("*") if not p.is_dir())
-        return fa == fb and all(os.path.samefile(a / f, b / f) for f in fa)
+        return fa == fb and all(same_file(a / f, b / f) for f in fa)
     except OSError:
         return False
 
@@ -102,20 +110,28 @@ def _remove(path):
         path.unlink()
 
 
+MANIFEST = "units.json"
+
+
 def keep_outputs():
     """onstart: settle what a killed run left, then keep every existing output aside."""
     settle_kept()
-    for unit in kept_units():
-        if Path(unit).exists():
-            _link_tree(Path(unit), KEEP_DIR / unit)
+    units = [u for u in kept_units() if Path(u).exists()]
+    for unit in units:
+        _link_tree(Path(unit), KEEP_DIR / unit)
+    if units:  # what was kept, read back by settle_kept (also after a kill, whatever the next sheet)
+        (KEEP_DIR / MANIFEST).write_text(json.dumps(units))
 
 
 def _incomplete(units):
     """The units Snakemake marks as incomplete (a job started on them and did not finish)."""
     try:
-        return set(workflow.persistence._filter_incomplete_keys(units))
-    except Exception:  # another Snakemake's persistence: a missing output still counts
-        return set()
+        persistence = workflow.persistence
+        if hasattr(persistence, "_clear_cache"):
+            persistence._clear_cache()
+        return set(persistence._filter_incomplete_keys(units))
+    except Exception:  # another Snakemake's persistence: every missing output counts as interrupted
+        return {u for u in units if not Path(u).exists()}
 
 
 def previous_path(unit):
@@ -138,7 +154,10 @@ def settle_kept():
     """onsuccess/onerror: put back, move to previous/ or drop each kept output (see the top)."""
     if not KEEP_DIR.is_dir():
         return
-    units = [u for u in kept_units() if (KEEP_DIR / u).exists()]
+    try:  # the units kept by the run that made KEEP_DIR (its sheet may differ from this one's)
+        units = [u for u in json.loads((KEEP_DIR / MANIFEST).read_text()) if (KEEP_DIR / u).exists()]
+    except (OSError, ValueError):  # killed before the manifest was written: nothing was removed yet
+        units = []
     incomplete = _incomplete(units)
     restored, moved, failed_now = [], [], {}
     replaced = [u for u in units if u not in incomplete and Path(u).exists() and not _same(Path(u), KEEP_DIR / u)]
