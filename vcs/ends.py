@@ -140,15 +140,24 @@ def _fan_caps(
 
 
 def _end_from_faces(vertices: NDArray[np.floating], faces: NDArray[np.integer], source: str) -> End:
-    """The end of a cap given as triangles: area centroid, unit normal by the winding, equivalent radius."""
+    """The end of a cap given as triangles: area centroid, unit normal, equivalent radius.
+
+    The normal is the winding's (the sum of the triangles' area vectors) for an open cap. A cap
+    file that is a closed thin disc (both faces and the rim: a segmentation tool's "cap solid")
+    has an area vector sum of ~0, whose direction is round-off: then the normal is the principal
+    axis of the area-weighted normal tensor sum a n n^T (the disc's axis; the caller turns it into
+    the lumen), and the equivalent radius counts one face (half the area)."""
     tri = vertices[faces]
     cross = triangle_cross(tri)
     area2 = np.linalg.norm(cross, axis=1)
     area = 0.5 * area2.sum()
     center = (tri.mean(axis=1) * area2[:, None]).sum(axis=0) / max(area2.sum(), 1e-300)
     n = cross.sum(axis=0)
-    normal = n / max(np.linalg.norm(n), 1e-300)
-    return End(center, normal, float(np.sqrt(area / np.pi)), source)
+    if np.linalg.norm(n) >= 0.5 * area2.sum():  # an open cap: the winding gives the normal
+        return End(center, n / max(np.linalg.norm(n), 1e-300), float(np.sqrt(area / np.pi)), source)
+    unit = cross / np.maximum(area2, 1e-300)[:, None]
+    _, axes = np.linalg.eigh((unit * area2[:, None]).T @ unit)
+    return End(center, axes[:, -1], float(np.sqrt(0.5 * area / np.pi)), source)
 
 
 # ------------------------------------------------------------------ candidate ends

@@ -118,3 +118,17 @@ def test_absurd_L_is_named_in_the_error(tmp_path):
     write_stl(make_phantom("tube", resolution=2.0), tmp_path / "t.stl")
     r = run("fit", tmp_path / "t.stl", "-o", tmp_path / "o", "--units", "mm", "--L", "500")
     assert r.returncode == 2 and "L = 500" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_a_closed_thin_disc_cap_file_gives_its_axis_and_radius():
+    """Regression: a cap file that is a closed thin disc (both faces and the rim) has an area
+    vector sum of ~0; its normal was that round-off's direction ([0, 1, 0] for a disc in the
+    z = 0 plane: the centerline fit then failed, 'Singular matrix') and its radius sqrt(2) too big.
+    Truth: the disc's axis z and the equivalent radius of its 32-gon face (1.5 mm circumradius)."""
+    from vcs.ends import _end_from_faces
+
+    disc = trimesh.creation.cylinder(radius=1.5, height=0.01, sections=32)
+    end = _end_from_faces(np.asarray(disc.vertices), np.asarray(disc.faces), "cap")
+    assert abs(abs(end.normal[2]) - 1.0) < 1e-9
+    polygon = np.sqrt(0.5 * 32 * 1.5**2 * np.sin(2 * np.pi / 32) / np.pi)  # equivalent radius of the 32-gon
+    assert end.radius == pytest.approx(polygon, rel=0.01)
