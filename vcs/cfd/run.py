@@ -7,13 +7,9 @@ coverage collected into ``status.json``."""
 from __future__ import annotations
 
 import json
-import logging
 import math
-import os
 import re
 import shutil
-import signal
-import subprocess
 import time
 from pathlib import Path
 from typing import Any
@@ -35,103 +31,38 @@ from vcs.cfd.foamfiles import (
     read_patch_field,
     window_mean,
 )
-from vcs.cfd.openfoam import detect_openfoam, foam_env
+from vcs.cfd.openfoam import detect_openfoam
+from vcs.cfd.utilities import (
+    _fmt_time,
+    _latest_time,
+    _Runner,
+    _solver_failure,
+    _time_dirs,
+    _utility_failure,
+    progress,
+    stop_group,
+)
 
-_log = logging.getLogger(__name__)  # progress of a case (the workflow's openfoam_solve log)
+# the names other code imports from vcs.cfd.run (tests, bench), kept importable while it is split
+__all__ = [
+    "STAGE_FILES",
+    "_Runner",
+    "_pyfoam_check",
+    "_solver_failure",
+    "_utility_failure",
+    "inlet_profile",
+    "patch_check",
+    "plateau_pressure_change",
+    "run_case",
+    "stationarity",
+    "stop_group",
+    "transient_plan",
+    "volume_l2_ratio",
+]
 
 # --------------------------------------------------------------------------- running
 
 STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
-
-
-def _run_group(
-    cmd: list[str], cwd: Path, env: dict[str, str], out: Any, timeout: float | None
-) -> subprocess.CompletedProcess[bytes]:
-    """Run ``cmd`` in its own process group and wait; on a timeout, Ctrl-C (KeyboardInterrupt) or
-    any other exit of the caller, stop the WHOLE group (mpirun and every rank: SIGTERM, then
-    SIGKILL after 5 s) before re-raising, so that no solver keeps running after its job ended."""
-    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
-    try:
-        return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=timeout))
-    except BaseException:
-        stop_group(proc)
-        raise
-
-
-def stop_group(proc: subprocess.Popen[bytes]) -> None:
-    """SIGTERM to the process group of ``proc`` (started with ``start_new_session``), SIGKILL
-    after 5 s if it is still there."""
-    for sig, grace in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            break
-        try:
-            proc.wait(timeout=grace)
-            break
-        except subprocess.TimeoutExpired:
-            continue
-
-
-class _Runner:
-    """Runs OpenFOAM utilities in a case, each logged to ``logs/log.<name>`` and timed."""
-
-    def __init__(self, case_dir: Path, timings: dict[str, float], timeout: float | None) -> None:
-        self.case = case_dir
-        self.logs = case_dir / "logs"
-        self.logs.mkdir(exist_ok=True)
-        self.timings = timings
-        self.timeout = timeout
-        self.env = foam_env()
-
-    def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess[bytes]:
-        """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9,
-        an executable that cannot be started 127. Never raises, except when the caller is interrupted
-        (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the workflow scripts): then the
-        utility's whole process group is stopped first."""
-        cmd = list(args)
-        if ranks > 1:
-            mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
-            if hasattr(os, "geteuid") and os.geteuid() == 0:
-                mpi.insert(1, "--allow-run-as-root")
-            for var in ("WM_PROJECT_DIR", "FOAM_SIGFPE"):
-                if var in self.env:
-                    mpi += ["-x", var]
-            cmd = mpi + cmd + ["-parallel"]
-        t0 = time.perf_counter()
-        _log.info("running %s (logs/log.%s)", " ".join(args), log)
-        with open(self.logs / f"log.{log}", "w") as fh:
-            fh.write(f"# {' '.join(cmd)}\n")
-            fh.flush()
-            try:
-                r = _run_group(cmd, self.case, self.env, fh, self.timeout)
-            except subprocess.TimeoutExpired:
-                r = subprocess.CompletedProcess(cmd, returncode=-9)
-                fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
-            except OSError as exc:  # e.g. the utility is not on PATH: a failed utility, not a crash
-                r = subprocess.CompletedProcess(cmd, returncode=127)
-                fh.write(f"\n--> FOAM FATAL ERROR: vcsflow could not start {cmd[0]}: {exc}\n")
-            else:
-                if r.returncode < 0:  # killed from outside (OOM killer, kill, a scheduler): say by what
-                    try:
-                        name = signal.Signals(-r.returncode).name
-                    except ValueError:
-                        name = "unknown signal"
-                    fh.write(f"\n# vcsflow: killed by signal {-r.returncode} ({name})\n")
-        self.timings[log] = round(self.timings.get(log, 0.0) + time.perf_counter() - t0, 3)
-        return r
-
-
-def _latest_time(case_dir: Path) -> str | None:
-    """Name of the case's largest numeric time folder, or None."""
-    times = []
-    for p in case_dir.iterdir():
-        if p.is_dir():
-            try:
-                times.append((float(p.name), p.name))
-            except ValueError:
-                pass
-    return max(times)[1] if times else None
 
 
 def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
@@ -703,24 +634,6 @@ def _round_up(x: float, digits: int = 3) -> float:
     return math.ceil(x / 10.0**e - 1e-9) * 10.0**e
 
 
-def _fmt_time(t: float) -> str:
-    """A solver time for a dictionary (12 significant digits)."""
-    return f"{t:.12g}"
-
-
-def _time_dirs(root: Path) -> list[tuple[float, str]]:
-    """(value, name) of the numeric time folders in ``root``, sorted by value."""
-    out = []
-    if root.is_dir():
-        for p in root.iterdir():
-            if p.is_dir():
-                try:
-                    out.append((float(p.name), p.name))
-                except ValueError:
-                    pass
-    return sorted(out)
-
-
 def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak_velocity: float) -> dict[str, Any]:
     """The wash-out and averaging window of the transient fallback, from the flow-through time.
 
@@ -808,7 +721,7 @@ def _transient_fallback(
         plan = transient_plan(state, float(volume), times[-1][0], float(prof["peak_velocity"]))
         tr.update(plan)
         tr["started_from"] = f"SIMPLE iteration {times[-1][1]}"
-        _log.info(
+        progress.info(
             "steady SIMPLE not converged (%s): transient fallback from iteration %s, flow-through time "
             "%.3g s, wash-out %.3g s, window %.3g s (%.3g flow-through times), solver time %s to %s",
             simple_reason,
@@ -893,7 +806,7 @@ def _transient_fallback(
                 "end_time": plan["end_time"] + w,
             }
             tr.update(plan)
-            _log.info(
+            progress.info(
                 "doubling the window to %.3g flow-through times (%d of at most %d): pimpleFoam continues to %s",
                 plan["window_flow_throughs"],
                 len(extensions),
@@ -963,7 +876,7 @@ _HALF_WORDS = {  # the half-window differences of :func:`stationarity`, in words
 def _log_verdict(plan: dict[str, Any], verdict: dict[str, Any]) -> None:
     """One log line: the stationarity test of a window (:func:`stationarity`)."""
     d, tol = verdict["half_window_differences"], verdict["tolerances"]
-    _log.info(
+    progress.info(
         "window of %.3g flow-through times: half-window differences %s: %s",
         plan["window_flow_throughs"],
         ", ".join(f"{_HALF_WORDS[k]} {100 * d[k]:.2g} % (tolerance {100 * tol[k]:g} %)" for k in d),
@@ -1125,67 +1038,6 @@ def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any],
         plt.close(fig)
     except Exception:  # noqa: BLE001 - plotting must never fail a run
         pass
-
-
-def _utility_failure(case_dir: Path, utility: str) -> str:
-    """'<utility> failed: <FOAM FATAL ERROR message> (see logs/log.<utility>)'."""
-    log = case_dir / "logs" / f"log.{utility}"
-    txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
-    m = re.search(r"FOAM FATAL (?:IO )?ERROR[^\n]*\n((?:[^\n]*\n){0,8})", txt)
-    detail = ""
-    if m:  # the message lines, without the "From ..."/"in file ..." trailer
-        lines = [ln.strip() for ln in m.group(1).splitlines() if ln.strip()]
-        lines = [ln for ln in lines if not ln.startswith(("From ", "in file ", "at line ", "FOAM exiting"))]
-        detail = ": " + " ".join(" ".join(lines).split())[:300] if lines else ""
-    elif "# vcsflow: timeout" in txt:
-        detail = ": timeout"
-    else:
-        sig = _signal_reason(txt, log)
-        if sig:
-            return f"{utility} {sig}"
-    return f"{utility} failed{detail} (see logs/log.{utility})"
-
-
-# signals that come from outside a process (the OOM killer and kill send KILL; schedulers TERM,
-# XCPU; a closed terminal HUP): any other signal is the utility's own crash
-_OUTSIDE_SIGNALS = ("SIGKILL", "SIGTERM", "SIGINT", "SIGHUP", "SIGXCPU")
-
-
-def _signal_reason(txt: str, log: Path) -> str | None:
-    """``was killed by signal N (NAME) ...`` / ``crashed with signal ...`` when the runner
-    recorded a death by signal in the log (see :class:`_Runner`), else None."""
-    k = re.search(r"# vcsflow: killed by signal (\d+) \(([\w ]+)\)", txt)
-    if not k:
-        return None
-    if k.group(2) in _OUTSIDE_SIGNALS:
-        return (
-            f"was killed by signal {k.group(1)} ({k.group(2)}) from outside the run "
-            f"(out of memory, a scheduler's limit, or kill; see logs/{log.name})"
-        )
-    return f"crashed with signal {k.group(1)} ({k.group(2)}) (see logs/{log.name})"
-
-
-def _solver_failure(log: Path, stage: str, solver: str = "simpleFoam") -> str:
-    """One-line reason for a failed solver stage from the end of its log."""
-    txt = log.read_text(errors="replace")[-4000:] if log.exists() else ""
-    m = re.search(r"(FOAM FATAL[^\n]*\n(?:[^\n]*\n){0,6})", txt)
-    # a divergence: OpenFOAM's sigFpe handler's stack trace, the shell's "Floating point exception"
-    # at the start of a line, or death by SIGFPE; NOT the banner's "trapFpe: Floating point
-    # exception trapping enabled" (or the older "sigFpe : Enabling ..."), which every log has
-    if (
-        "sigFpe::sigHandler" in txt
-        or re.search(r"^Floating point exception", txt, re.M)
-        or "# vcsflow: killed by signal 8 (SIGFPE)" in txt
-    ):
-        return f"{solver} ({stage}) diverged: floating point exception (see logs/{log.name})"
-    if "# vcsflow: timeout" in txt:
-        return f"{solver} ({stage}) stopped: timeout (cfd.solver.timeout_s; see logs/{log.name})"
-    k = _signal_reason(txt, log)
-    if k:
-        return f"{solver} ({stage}) {k}"
-    if m:
-        return f"{solver} ({stage}) failed: " + " ".join(m.group(1).split())[:400]
-    return f"{solver} ({stage}) exited with an error (see logs/{log.name})"
 
 
 def _pyfoam_check(log: Path, own: dict[str, Any] | None = None) -> dict[str, Any]:
