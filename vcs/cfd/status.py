@@ -1,0 +1,273 @@
+"""Collecting a run's results into ``status.json``: the solver logs (residuals, iterations,
+``residuals.csv/png``, PyFoam's cross-check), flow rates, mass imbalance, patch pressures and the
+inlet-outlet pressure difference, WSS on the wall (time-averaged: TAWSS and OSI), and writing the
+file at the end of a run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vcs.cfd.case import patch_role
+from vcs.cfd.foamfiles import (
+    last_function_value,
+    oscillatory_shear_index,
+    parse_solver_log,
+    patch_geometry,
+    read_patch_field,
+    window_mean,
+)
+from vcs.cfd.utilities import _latest_time
+
+
+def collect(
+    case_dir: Path,
+    status: dict[str, Any],
+    logs: list[Path],
+    state: dict[str, Any],
+    window: tuple[float, float] | None = None,
+) -> None:
+    """Add residuals, iterations, flow rates, mass imbalance, the inlet-outlet pressure difference
+    and WSS (time-averaged: TAWSS and OSI too) to ``status``.
+
+    Parameters
+    ----------
+    case_dir : Path
+        The case.
+    status : dict
+        The status being built (``fields`` says which field files hold the result).
+    logs : list of Path
+        The SIMPLE stages' logs (residuals, iterations).
+    state : dict
+        Case description.
+    window : (float, float) or None
+        The averaging window (solver times, s) of a time-averaged result: flow rates and patch
+        pressures are time-weighted means over it; None: the last value.
+    """
+    _collect_logs(case_dir, status, logs)
+    _collect_patches(case_dir, status, state, window)
+    _collect_wall_shear(case_dir, status, state)
+
+
+def _collect_logs(case_dir: Path, status: dict[str, Any], logs: list[Path]) -> None:
+    """Iterations per stage, the last residuals and continuity errors, ``residuals.csv/png`` and
+    PyFoam's reading of the last log (see :func:`collect`)."""
+    rows: list[dict[str, Any]] = []
+    stage_iters = {}
+    for lg in logs:
+        if lg.exists():
+            parsed = parse_solver_log(lg)
+            rows += parsed["rows"]
+            stage_iters[lg.name.replace("log.", "")] = len(parsed["rows"])
+    status["stage_iterations"] = stage_iters
+    if rows:
+        _write_residuals(case_dir, rows)
+        last = rows[-1]
+        status["iterations"] = int(last["time"])
+        status["final_residuals"] = {k: last[k] for k in ("p", "U") if k in last}
+        status["continuity_errors"] = {
+            k.replace("cont_", ""): last[k] for k in ("cont_local", "cont_global", "cont_cumulative") if k in last
+        }
+    last_log = [lg for lg in logs if lg.exists()][-1:]
+    own_last = parse_solver_log(last_log[0])["rows"][-1:] if last_log else []
+    status["pyfoam_log_analysis"] = _pyfoam_check(last_log[0], own_last[0] if own_last else None) if last_log else None
+
+
+def _collect_patches(
+    case_dir: Path, status: dict[str, Any], state: dict[str, Any], window: tuple[float, float] | None
+) -> None:
+    """Flow rates, mass imbalance, patch pressures and the inlet-outlet pressure difference from
+    the function objects (see :func:`collect`)."""
+    rho = float(state["cfd"]["physics"]["rho"])
+
+    def fo_value(name: str) -> float | None:
+        """Value of function object ``name``: mean over the averaging window, else the last one."""
+        if window is not None:
+            return window_mean(case_dir, name, *window)
+        return last_function_value(case_dir, name)
+
+    flows = {}
+    for p in state["patches"]:
+        if p["role"] in ("inlet", "outlet"):
+            flows[p["name"]] = fo_value(f"flowRate_{p['name']}")
+    status["flow_rates"] = flows
+    q_in = sum(v for k, v in flows.items() if v is not None and patch_role(k) == "inlet")
+    q_out = sum(v for k, v in flows.items() if v is not None and patch_role(k) == "outlet")
+    if q_in:
+        status["mass_imbalance"] = abs(q_in + q_out) / abs(q_in)
+    pin = {p["name"]: fo_value(f"pressure_{p['name']}") for p in state["patches"] if p["role"] in ("inlet", "outlet")}
+    status["patch_pressure"] = pin
+    pi = [v for k, v in pin.items() if patch_role(k) == "inlet" and v is not None]
+    po = [v for k, v in pin.items() if patch_role(k) == "outlet" and v is not None]
+    if pi and po:
+        dp = pi[0] - float(np.mean(po))
+        status["inlet_minus_outlet_pressure"] = {
+            "kinematic_m2s2": dp,
+            "Pa": dp * rho,
+            "definition": "area-mean p on the inlet minus the mean of the outlets' area-mean p"
+            + (" (time-weighted over the averaging window)" if window is not None else ""),
+            "pressure_recovery": bool(dp < 0),  # p rises downstream (e.g. after the jet): not a drop
+        }
+
+
+def _collect_wall_shear(case_dir: Path, status: dict[str, Any], state: dict[str, Any]) -> None:
+    """WSS on the wall at the latest time (time-averaged: TAWSS and OSI too; see :func:`collect`)."""
+    rho = float(state["cfd"]["physics"]["rho"])
+    latest = _latest_time(case_dir)
+    fields = status.get("fields") or {}
+    if latest and float(latest) > 0:
+        try:
+            walls = _wall_faces(case_dir, state)
+            if not walls:
+                return
+            a = np.concatenate([w[1] for w in walls])
+            tdir = case_dir / latest
+            wss_name = fields.get("WSS", "wallShearStress")
+            if not (tdir / wss_name).exists():
+                return
+            mean_vec = _wall_values(tdir, wss_name, walls)
+            mag = np.linalg.norm(mean_vec, axis=1)
+
+            def stats(x: NDArray[np.floating], scale: float) -> dict[str, float]:
+                return {
+                    "mean": float((x * a).sum() / a.sum() * scale),
+                    "max": float(x.max() * scale),
+                    "min": float(x.min() * scale),
+                }
+
+            status["wall_shear_stress_Pa"] = stats(mag, rho) | {"field": wss_name}
+            tawss_name = fields.get("TAWSS")
+            if tawss_name and (tdir / tawss_name).exists():
+                tawss = _wall_values(tdir, tawss_name, walls)
+                status["tawss_Pa"] = stats(tawss, rho) | {"field": tawss_name}
+                osi = oscillatory_shear_index(mean_vec, tawss)
+                status["osi"] = {"mean": float((osi * a).sum() / a.sum()), "max": float(osi.max())}
+        except Exception as exc:  # noqa: BLE001
+            status["wall_shear_stress_Pa"] = {"error": str(exc)}
+
+
+def _log_summary(parsed: dict[str, Any], log: Path) -> dict[str, Any]:
+    """What status.json keeps of a parsed solver log (see :func:`parse_solver_log`)."""
+    return {
+        "log": log.name,
+        "time_lines": parsed["time_lines"],
+        "time_unit": parsed["time_unit"],
+        "iterations_read": len(parsed["rows"]),
+        "converged_message": parsed["converged_message"],
+        "converged_iterations": parsed["converged_iterations"],
+        "ended": parsed["ended"],
+        "execution_time_s": parsed["execution_time_s"],
+        "clock_time_s": parsed["clock_time_s"],
+        "banner": parsed["banner"],
+    }
+
+
+def _write_residuals(case_dir: Path, rows: list[dict[str, Any]]) -> None:
+    """Write ``residuals.csv`` and (best effort) ``residuals.png`` of the parsed log rows."""
+    import csv
+
+    keys = ["iteration", "p", "U", "cont_local", "cont_global", "cont_cumulative"]
+    with open(case_dir / "residuals.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for r in rows:
+            w.writerow([r.get("time") if k == "iteration" else r.get(k, "") for k in keys])
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6, 4))
+        it = [r["time"] for r in rows]
+        for k in ("p", "U"):
+            ax.semilogy(it, [r.get(k, np.nan) for r in rows], label=k)
+        ax.set_xlabel("SIMPLE iteration")
+        ax.set_ylabel("initial residual")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(case_dir / "residuals.png", dpi=100)
+        plt.close(fig)
+    except Exception:  # plotting must never fail a run
+        pass
+
+
+def _pyfoam_check(log: Path, own: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Cross-check of the own log parser with PyFoam's BoundingLogAnalyzer (last iteration).
+
+    Parameters
+    ----------
+    log : Path
+        A solver log.
+    own : dict or None
+        The own parser's last row of that log (``time`` and initial residuals), to compare with.
+
+    Returns
+    -------
+    dict
+        ``log``, ``last_iteration`` (float or None), ``initial_residuals`` (PyFoam's names:
+        ``Ux``, ``p``, ...), ``continuity``; ``agrees_with_parser`` (bool, when ``own`` is given:
+        same last iteration and p residual within 1e-6 relative); ``note`` when PyFoam read no
+        time line (e.g. a time unit its regular expression does not accept); ``error`` (and
+        nothing else) when PyFoam failed.
+    """
+    try:
+        from PyFoam.LogAnalysis.BoundingLogAnalyzer import BoundingLogAnalyzer
+
+        a = BoundingLogAnalyzer(doFiles=False, doTimelines=True)
+        with open(log) as fh:
+            a.analyze(fh)
+        lin = a.getAnalyzer("Linear").getCurrentData()
+        cont = a.getAnalyzer("Continuity").getCurrentData()
+        try:  # PyFoam gives the time as a string, "" when it read no time line
+            t: float | None = float(a.getTime())
+        except (TypeError, ValueError):
+            t = None
+        out: dict[str, Any] = {
+            "log": log.name,
+            "last_iteration": t,
+            "initial_residuals": {k: v for k, v in lin.items() if "_" not in k},
+            "continuity": cont,
+        }
+    except Exception as exc:  # noqa: BLE001 - optional cross-check only
+        return {"log": log.name, "error": f"{type(exc).__name__}: {exc}"}
+    if out["last_iteration"] is None:
+        unit = parse_solver_log(log)["time_unit"]
+        out["note"] = (
+            f"PyFoam's analyzer read no time line of {log.name} (time unit {unit!r}); "
+            "its residuals cannot be tied to an iteration"
+        )
+    if own:
+        p_own, p_pf = own.get("p"), out["initial_residuals"].get("p")
+        out["agrees_with_parser"] = bool(
+            out["last_iteration"] == own.get("time")
+            and p_own is not None
+            and p_pf is not None
+            and abs(float(p_pf) - float(p_own)) <= 1e-6 * max(abs(float(p_own)), 1e-300)
+        )
+    return out
+
+
+def _wall_faces(case_dir: Path, state: dict[str, Any]) -> list[tuple[str, NDArray[np.floating]]]:
+    """(name, face areas m^2) of the wall patches."""
+    out = []
+    for p in state["patches"]:
+        if p["role"] == "wall":
+            _, sf = patch_geometry(case_dir, p["name"])
+            out.append((p["name"], np.linalg.norm(sf, axis=1)))
+    return out
+
+
+def _wall_values(time_dir: Path, field: str, walls: list[tuple[str, NDArray[np.floating]]]) -> NDArray[np.floating]:
+    """A field's values on all wall faces (concatenated in ``walls`` order)."""
+    vals = []
+    for name, a in walls:
+        v = read_patch_field(time_dir / field, name, len(a))
+        if v is None or len(v) != len(a):
+            raise ValueError(f"{time_dir.name}/{field} has no values for patch {name!r}")
+        vals.append(v)
+    return np.concatenate(vals)
