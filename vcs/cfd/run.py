@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import shutil
 import time
 from pathlib import Path
@@ -17,16 +16,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vcs.cfd.case import CASE_JSON, inlet_profile, patch_role, render_files
+from vcs.cfd.case import CASE_JSON, inlet_profile, render_files
 from vcs.cfd.foamfiles import (
     function_series,
     parse_check_mesh_volume,
-    parse_layer_summary,
     parse_solver_log,
-    read_boundary,
     read_internal_field,
     window_mean,
 )
+from vcs.cfd.meshing import _check_mesh, _mesh_report, patch_check
 from vcs.cfd.openfoam import detect_openfoam
 from vcs.cfd.status import _log_summary, _pyfoam_check, _wall_faces, _wall_values, collect
 from vcs.cfd.utilities import (
@@ -59,110 +57,6 @@ __all__ = [
 # --------------------------------------------------------------------------- running
 
 STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
-
-
-def _check_mesh(log: Path) -> tuple[bool, int | None, str]:
-    """(mesh OK, number of cells, why not) from a checkMesh log."""
-    txt = log.read_text(errors="replace")
-    m = re.search(r"^\s*cells:\s+(\d+)", txt, re.M)
-    cells = int(m.group(1)) if m else None
-    if "Mesh OK." in txt:
-        return True, cells, ""
-    fails = re.findall(r"\*\*\*.*", txt)
-    m = re.search(r"Failed (\d+) mesh checks", txt)
-    why = (f"checkMesh failed {m.group(1)} check(s): " if m else "checkMesh did not report 'Mesh OK.': ") + "; ".join(
-        f.strip() for f in fails[:5]
-    )
-    return False, cells, why
-
-
-def _mesh_report(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
-    """What status.json keeps of the mesh: prism-layer coverage (snappyHexMesh's layer table)
-    and the jet refinement region."""
-    m = state["cfd"]["mesh"]
-    log = case_dir / "logs" / "log.snappyHexMesh"
-    layers: dict[str, Any] = {"requested": int(m["layers"])}
-    if int(m["layers"]) > 0:
-        rep: dict[str, Any] = parse_layer_summary(log.read_text(errors="replace") if log.exists() else "")
-        layers.update(rep)
-        walls = [p for name, p in rep["patches"].items() if patch_role(name) == "wall"]
-        if walls:
-            faces = sum(p["faces"] for p in walls)
-            layers["mean_layers"] = sum(p["mean_layers"] * p["faces"] for p in walls) / faces
-            layers["coverage"] = layers["mean_layers"] / int(m["layers"])  # layers added / requested
-        else:  # no layer table: snappyHexMesh added none
-            layers["coverage"] = 0.0
-    return {"layers": layers, "jet_refinement": state.get("jet_region")}
-
-
-def patch_check(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
-    """Did every STL solid become a patch of at least ``mesh.min_patch_faces`` faces, and is the
-    ``background`` patch (the blockMesh box) empty? Read from the meshed case's
-    ``constant/polyMesh/boundary``.
-
-    snappyHexMesh drops an end whose cap is small against the cells around it and still writes a
-    mesh that checkMesh calls OK; the solver then fails far from the cause ("Unable to set
-    reference cell", a floating point exception). A non-empty ``background`` patch means the
-    mesh leaked out of the vessel into the box.
-
-    Parameters
-    ----------
-    case_dir : Path
-        A case after snappyHexMesh (ASCII polyMesh).
-    state : dict
-        Case description (``solids`` with role, area and cell size, ``mesh_sizing``).
-
-    Returns
-    -------
-    dict
-        ``ok`` (bool), ``patches``: {solid: {``role``, ``faces`` (0 when missing),
-        ``min_faces``, ``cell_size_m`` (at that patch), ``radius_m`` (equivalent radius of an
-        end cap)}}, ``background_faces`` (int or None), ``problems`` (list of str), ``reason``
-        (one line: what happened and what to change; None when ok).
-    """
-    sizing = state.get("mesh_sizing") or {}
-    min_faces = int(sizing.get("min_patch_faces", state["cfd"]["mesh"].get("min_patch_faces", 1)))
-    try:
-        boundary = read_boundary(case_dir / "constant" / "polyMesh")
-    except (OSError, ValueError) as exc:
-        why = f"no readable mesh boundary after snappyHexMesh ({exc})"
-        return {"ok": False, "patches": {}, "background_faces": None, "problems": [why], "reason": why}
-    patches: dict[str, Any] = {}
-    problems = []
-    for s in state["solids"]:
-        faces = int(boundary.get(s["name"], {}).get("nFaces", 0))
-        info: dict[str, Any] = {"role": s["role"], "faces": faces, "min_faces": min_faces}
-        h = s.get("cell_size_m")
-        if h is not None:
-            info["cell_size_m"] = h
-        if s["role"] in ("inlet", "outlet") and s.get("area_m2"):
-            info["radius_m"] = math.sqrt(s["area_m2"] / math.pi)
-        patches[s["name"]] = info
-        if faces >= min_faces:
-            continue
-        what = "lost in meshing: 0 faces" if faces == 0 else f"under-resolved in meshing: {faces} faces"
-        text = f"{s['name']} {what} (minimum {min_faces})"
-        if h is not None and "radius_m" in info:
-            text += f"; cell size {h * 1e3:.3g} mm vs {s['name']} radius {info['radius_m'] * 1e3:.3g} mm"
-        elif h is not None:
-            text += f"; cell size {h * 1e3:.3g} mm"
-        problems.append(text)
-    bg = int(boundary.get("background", {}).get("nFaces", 0))  # snappyHexMesh removes an empty patch
-    if bg:
-        problems.append(
-            f"the mesh leaked out of the vessel: the background patch (the blockMesh box) has {bg} faces "
-            "(must be 0); the wall STL is not closed or cfd.mesh.inside_point is outside the lumen"
-        )
-    reason = None
-    if problems:
-        source = (sizing.get("cell_size") or {}).get("source")
-        lost = [p for p in problems if "in meshing" in p]
-        advice = {
-            "patient": "lower the patient's cell_size_mm in the patients sheet",
-            "auto": "raise cfd.mesh.cells_across_end (or give a smaller cfd.mesh.cell_size)",
-        }.get(str(source), "lower cfd.mesh.cell_size")
-        reason = "; ".join(problems) + (f"; {advice}" if lost else "")
-    return {"ok": not problems, "patches": patches, "background_faces": bg, "problems": problems, "reason": reason}
 
 
 def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any]:
