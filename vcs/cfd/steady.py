@@ -1,0 +1,214 @@
+"""The steady strategy: simpleFoam's start-up (first order) and main stage (residualControl),
+and, when SIMPLE stops above the residual tolerance, the plateau check (more iterations; steady
+when the solution no longer changes). Also the convergence criterion in words."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vcs.cfd.case import render_files
+from vcs.cfd.foamfiles import function_series, parse_solver_log, read_internal_field
+from vcs.cfd.status import _wall_faces, _wall_values
+from vcs.cfd.utilities import _Runner, _solver_failure, _time_dirs
+
+# the files every solver stage renders again (end time, schemes, residual control, averaging)
+STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
+
+
+def _plateau_check(
+    case_dir: Path,
+    state: dict[str, Any],
+    status: dict[str, Any],
+    run: _Runner,
+    ranks: int,
+    prof: dict[str, Any],
+    last: dict[str, Any],
+) -> dict[str, Any]:
+    """SIMPLE stopped above the residual tolerance: is it a plateau of a steady solution?
+
+    On real meshes the initial residuals of SIMPLE often level off above 1e-5 (a few distorted
+    cells near snapped edges) while the solution no longer changes. When the last residuals are
+    below ``cfd.solver.plateau.max_residual``, SIMPLE runs ``plateau.iterations`` more iterations
+    from its last state; the solution is steady (``converged_by`` ``residual_plateau``) when the
+    residuals stay below ``max_residual`` over those iterations, the inlet-outlet pressure
+    difference departs from its first value by less than ``plateau.tolerance`` at every one of
+    them (relative to max(|dp|, 10 % of the inlet dynamic pressure), as in :func:`vcs.cfd.transient.stationarity`;
+    every iteration, so a limit cycle whose period divides the window cannot pass), and the
+    area-mean |WSS| and U (volume-weighted L2 of the change / of U) differ between the two states
+    by less than ``plateau.tolerance``. A flow that keeps changing (a jet, vortex shedding) fails
+    the test and goes to the fallback.
+    Fills ``status["plateau"]``; never raises (a failure is recorded as ``why``).
+
+    Returns
+    -------
+    dict
+        ``converged_by``: ``residualControl`` (the extra iterations met the tolerance),
+        ``residual_plateau`` or None; ``ran``: the extra iterations ran; ``log``: their log.
+    """
+    sol = state["cfd"]["solver"]
+    pl = sol.get("plateau") or {}
+    n_it = int(pl.get("iterations", 0))
+    out: dict[str, Any] = {"converged_by": None}
+    if n_it <= 0:
+        return out
+    info: dict[str, Any] = {
+        "iterations": n_it,
+        "max_residual": float(pl["max_residual"]),
+        "tolerance": float(pl["tolerance"]),
+        "stationary": False,
+    }
+    status["plateau"] = info
+    res = {k: float(last[k]) for k in ("p", "U") if k in last}
+    if len(res) < 2 or not max(res.values()) < info["max_residual"]:
+        info["why"] = f"residuals {res} not below {info['max_residual']:g}: no plateau check"
+        return out
+    try:
+        _plateau_iterations(case_dir, state, run, ranks, prof, info, out)
+    except Exception as exc:  # noqa: BLE001 - the check never raises: its failure is a reason
+        info["why"] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    return out
+
+
+def _plateau_iterations(
+    case_dir: Path,
+    state: dict[str, Any],
+    run: _Runner,
+    ranks: int,
+    prof: dict[str, Any],
+    info: dict[str, Any],
+    out: dict[str, Any],
+) -> None:
+    """The plateau check's extra SIMPLE iterations and the comparison of the states before and
+    after them (:func:`_plateau_check`); fills ``info`` (``status["plateau"]``) and ``out``."""
+    sol = state["cfd"]["solver"]
+    n_it = int(info["iterations"])
+    root = case_dir / "processor0" if ranks > 1 else case_dir
+    times = _time_dirs(root)
+    if not times:
+        info["why"] = "SIMPLE wrote no time folder"
+        return
+    t0, t0_name = times[-1]
+    end = int(round(t0)) + n_it
+    render_files(case_dir, state, STAGE_FILES, end_time=end, cell_volumes=True)
+    out["ran"] = True
+    r = run(["simpleFoam"], "simpleFoam.plateau", ranks)
+    out["log"] = case_dir / "logs" / "log.simpleFoam.plateau"
+    parsed = parse_solver_log(out["log"])
+    if r.returncode != 0:
+        info["why"] = _solver_failure(out["log"], "plateau check")
+        return
+    if parsed["converged_message"] or (
+        parsed["rows"]
+        and parsed["rows"][-1].get("p", 1) < float(sol["tolerance"])
+        and parsed["rows"][-1].get("U", 1) < float(sol["tolerance"])
+    ):
+        info["why"] = "the extra iterations met the residual tolerance"
+        out["converged_by"] = "residualControl"
+        return
+    t1, t1_name = _time_dirs(root)[-1]
+    if t1 <= t0:
+        info["why"] = "the plateau check wrote no new time folder"
+        return
+    worst = max((max(row.get("p", 1.0), row.get("U", 1.0)) for row in parsed["rows"]), default=float("nan"))
+    info["max_residual_in_window"] = worst
+    if not worst < info["max_residual"]:
+        info["why"] = f"a residual rose to {worst:.3g} (>= {info['max_residual']:g}) during the extra iterations"
+        return
+    if ranks > 1 and run(["reconstructPar", "-time", f"{t0_name},{t1_name}"], "reconstructPar").returncode != 0:
+        info["why"] = "reconstructPar failed"
+        return
+    diffs = _state_change(case_dir, state, t0, t0_name, t1, t1_name, float(prof["peak_velocity"]))
+    info.update({"from_iteration": t0_name, "to_iteration": t1_name, "changes": diffs})
+    bad = [k for k, v in diffs.items() if not v < info["tolerance"]]  # NaN is not stationary
+    info["stationary"] = not bad
+    if bad:
+        info["why"] = "still changing: " + ", ".join(f"{k} {100 * diffs[k]:.3g} %" for k in bad)
+    else:
+        out["converged_by"] = "residual_plateau"
+
+
+def volume_l2_ratio(vol: NDArray[np.floating], diff: NDArray[np.floating], ref: NDArray[np.floating]) -> float:
+    """Volume-weighted L2 norm of a change of a vector field relative to that of the field:
+    sqrt(sum V |diff|^2 / sum V |ref|^2) (the U criterion of the plateau and stationarity tests)."""
+    return float(np.sqrt((vol * (diff**2).sum(1)).sum() / max((vol * (ref**2).sum(1)).sum(), 1e-300)))
+
+
+def plateau_pressure_change(dp: NDArray[np.floating], scale: float) -> float:
+    """Largest relative departure of the inlet-outlet pressure difference from its first value
+    over the plateau check's iterations: max_i |dp_i - dp_0| / scale (``scale`` > 0)."""
+    dp = np.asarray(dp, dtype=float)
+    return float(np.max(np.abs(dp - dp[0])) / scale) if len(dp) else float("nan")
+
+
+def _state_change(
+    case_dir: Path, state: dict[str, Any], t0: float, d0: str, t1: float, d1: str, peak_velocity: float
+) -> dict[str, float]:
+    """Relative change of the inlet-outlet pressure difference, the area-mean |WSS| and U (volume
+    L2) between two written SIMPLE states (time folders ``d0`` and ``d1``, solver times t0, t1)."""
+    inlets = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
+    outlets = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
+
+    def series(name: str) -> dict[int, float]:
+        ser = function_series(case_dir, f"pressure_{name}")
+        return {int(round(t)): float(v) for t, v in ser if t0 - 0.5 < t < t1 + 0.5}
+
+    s_in = series(inlets[0])
+    s_out = [series(n) for n in outlets]
+    its = [i for i in range(int(round(t0)), int(round(t1)) + 1) if i in s_in and all(i in o for o in s_out)]
+    if len(its) != int(round(t1)) - int(round(t0)) + 1:
+        raise ValueError(f"patch pressures missing at some iterations from {t0:g} to {t1:g}")
+    dps = np.array([s_in[i] - float(np.mean([o[i] for o in s_out])) for i in its])
+    dp_scale = max(abs(dps[-1]), 0.1 * 0.5 * peak_velocity**2)
+    walls = _wall_faces(case_dir, state)
+    area = np.concatenate([a for _, a in walls])
+
+    def wss(d: str) -> float:
+        v = _wall_values(case_dir / d, "wallShearStress", walls)
+        return float((np.linalg.norm(v, axis=1) * area).sum() / area.sum())
+
+    w0, w1 = wss(d0), wss(d1)
+    vol = read_internal_field(case_dir / d1 / "V")
+    u0 = read_internal_field(case_dir / d0 / "U", len(vol))
+    u1 = read_internal_field(case_dir / d1 / "U", len(vol))
+    if u0.shape != u1.shape or len(u1) != len(vol):
+        raise ValueError(f"U ({u0.shape}, {u1.shape}) and V ({vol.shape}) do not match")
+    l2 = volume_l2_ratio(vol, u1 - u0, u1)
+    return {
+        # every iteration of the window, not only its ends: a limit cycle whose period divides the
+        # window would have equal ends
+        "inlet_minus_outlet_pressure": plateau_pressure_change(dps, dp_scale),
+        "wss_mean": abs(w1 - w0) / max(abs(w1), 1e-300),
+        "U_L2": l2,
+    }
+
+
+def _criterion_text(sol: dict[str, Any]) -> str:
+    """The convergence criterion of a solver set-up, in words (status.json ``criterion``)."""
+    txt = f"initial residuals of p and U < {sol['tolerance']:g}"
+    pl = sol.get("plateau") or {}
+    if int(pl.get("iterations", 0)) > 0:
+        txt += (
+            f"; or a residual plateau: residuals < {pl['max_residual']:g} throughout {int(pl['iterations'])} more "
+            f"SIMPLE iterations, the inlet-outlet pressure difference within {100 * pl['tolerance']:g} % of its "
+            f"first value at every one of them, and mean |WSS| and U (volume L2) changed by < "
+            f"{100 * pl['tolerance']:g} %"
+        )
+    if sol.get("fallback") == "transient":
+        tr = sol["transient"]
+        txt += (
+            f"; else (fallback transient) the time average over {tr['flow_throughs']:g} flow-through times "
+            f"after a {tr['washout_flow_throughs']:g} flow-through wash-out, stationary: its two halves agree "
+            f"within {100 * tr['stationarity_tolerance']:g} % (inlet-outlet pressure difference, mean TAWSS) "
+            f"and {100 * tr['stationarity_tolerance_U']:g} % (volume L2 of U)"
+        )
+        if int(tr.get("max_doublings") or 0) > 0:
+            n = int(tr["max_doublings"])
+            txt += (
+                f"; a window that is not stationary is doubled, the average continued, at most {n} time"
+                f"{'s' if n > 1 else ''} (up to {tr['flow_throughs'] * 2**n:g} flow-through times)"
+            )
+    return txt
