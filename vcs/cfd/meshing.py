@@ -10,7 +10,44 @@ from pathlib import Path
 from typing import Any
 
 from vcs.cfd.case import patch_role
-from vcs.cfd.foamfiles import parse_layer_summary, read_boundary
+from vcs.cfd.foamfiles import parse_check_mesh_volume, parse_layer_summary, read_boundary
+from vcs.cfd.utilities import Stop, _Runner, _utility_failure
+
+
+def mesh_case(case_dir: Path, state: dict[str, Any], status: dict[str, Any], run: _Runner) -> None:
+    """Mesh the case and check it; fills ``status`` (``mesh``, ``cells``, ``lumen_volume_m3``,
+    ``mesh_ok``, ``stage``).
+
+    blockMesh, snappyHexMesh -overwrite, the prism-layer report, the patch check
+    (:func:`patch_check`), checkMesh (:func:`_check_mesh`).
+
+    Raises
+    ------
+    Stop
+        A utility failed, a patch was lost or under-resolved or the mesh leaked (reported before a
+        failed checkMesh: checkMesh calls such a mesh OK), or checkMesh failed.
+    """
+    if run(["blockMesh"], "blockMesh").returncode != 0:
+        raise Stop(_utility_failure(case_dir, "blockMesh"), "blockMesh")
+    if run(["snappyHexMesh", "-overwrite"], "snappyHexMesh").returncode != 0:
+        raise Stop(_utility_failure(case_dir, "snappyHexMesh"), "snappyHexMesh")
+    status["mesh"].update(_mesh_report(case_dir, state))
+    patches = patch_check(case_dir, state)
+    status["mesh"]["patches"] = patches["patches"]
+    status["mesh"]["background_faces"] = patches["background_faces"]
+    run(["checkMesh"], "checkMesh")
+    ok, cells, why = _check_mesh(case_dir / "logs" / "log.checkMesh")
+    status["cells"] = cells
+    check_log = (case_dir / "logs" / "log.checkMesh").read_text(errors="replace")
+    status["lumen_volume_m3"] = parse_check_mesh_volume(check_log)
+    if not patches["ok"]:  # a lost end or a leak: say so before anything else (checkMesh says OK)
+        status["mesh_ok"] = False
+        status["stage"] = "mesh"
+        raise Stop(patches["reason"], "snappyHexMesh")
+    if not ok:
+        status["mesh_ok"] = False
+        raise Stop(why, "checkMesh")
+    status["mesh_ok"] = True
 
 
 def _check_mesh(log: Path) -> tuple[bool, int | None, str]:

@@ -5,6 +5,7 @@ file at the end of a run."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,37 @@ from vcs.cfd.foamfiles import (
     window_mean,
 )
 from vcs.cfd.utilities import _latest_time
+
+
+def finish(
+    case_dir: Path, status: dict[str, Any], reason: str | None = None, failed_log: str | None = None
+) -> dict[str, Any]:
+    """Record the reason and the failed utility's log, write status.json, return the status.
+
+    Parameters
+    ----------
+    case_dir : Path
+        The case.
+    status : dict
+        The status of the run (``timings_s`` gets its ``total``).
+    reason : str or None
+        Why the run ended where it did (None: keep ``status["reason"]``).
+    failed_log : str or None
+        The utility that failed: ``failed_log`` is the absolute path of ``logs/log.<failed_log>``.
+
+    Returns
+    -------
+    dict
+        ``status``, as written.
+    """
+    if reason:
+        status["reason"] = reason
+    if failed_log:  # the log of the utility that failed (absolute path), for the user and the atlas
+        status["failed_log"] = str(case_dir / "logs" / f"log.{failed_log}")
+    timings = status["timings_s"]
+    timings["total"] = round(sum(v for k, v in timings.items() if k != "total"), 3)
+    (case_dir / "status.json").write_text(json.dumps(status, indent=2, default=float))
+    return status
 
 
 def collect(

@@ -4,6 +4,7 @@ when the solution no longer changes). Also the convergence criterion in words.""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -12,11 +13,171 @@ from numpy.typing import NDArray
 
 from vcs.cfd.case import render_files
 from vcs.cfd.foamfiles import function_series, parse_solver_log, read_internal_field
-from vcs.cfd.status import _wall_faces, _wall_values
-from vcs.cfd.utilities import _Runner, _solver_failure, _time_dirs
+from vcs.cfd.status import _log_summary, _wall_faces, _wall_values, collect
+from vcs.cfd.utilities import Stop, _Runner, _solver_failure, _time_dirs
 
 # the files every solver stage renders again (end time, schemes, residual control, averaging)
 STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
+
+
+@dataclass
+class SteadyResult:
+    """What the steady stage leaves to the rest of :func:`vcs.cfd.run.run_case`.
+
+    Attributes
+    ----------
+    converged : bool
+        SIMPLE converged (residualControl, or the plateau check).
+    main : dict
+        The main SIMPLE stage's log (:func:`vcs.cfd.foamfiles.parse_solver_log`).
+    logs : list of Path
+        The SIMPLE stages' logs, in the order they ran (start-up, main, plateau check).
+    """
+
+    converged: bool
+    main: dict[str, Any]
+    logs: list[Path]
+
+
+def steady_solve(
+    case_dir: Path, state: dict[str, Any], status: dict[str, Any], run: _Runner, ranks: int, prof: dict[str, Any]
+) -> SteadyResult:
+    """SIMPLE: start-up, main stage, and the plateau check when the residuals stopped above the
+    tolerance; fills ``status`` (``solver_log``, ``converged``, ``criterion_used``, ``fields``,
+    ``reason``, ``plateau``).
+
+    Parameters
+    ----------
+    case_dir : Path
+        A meshed case (decomposed when ``ranks`` > 1).
+    state : dict
+        Case description (``cfd.solver``).
+    status : dict
+        The status being built.
+    run : _Runner
+        Runs the solver in the case.
+    ranks : int
+        MPI ranks.
+    prof : dict
+        The inlet profile (:func:`vcs.cfd.case.inlet_profile`; ``peak_velocity``).
+
+    Returns
+    -------
+    SteadyResult
+        Converged or not (a divergence, handed to the transient fallback, is not), the main
+        stage's log, the stages' logs.
+
+    Raises
+    ------
+    Stop
+        The start-up failed; the main stage failed other than by a divergence the transient
+        fallback can take over; or no SIMPLE iteration could be read from its log.
+    """
+    logs: list[Path] = []
+    main, diverged = _run_simple(case_dir, state, status, run, ranks, logs)
+    converged = _residuals_converged(case_dir, state, status, logs, main, diverged)
+    if not converged:
+        if diverged is not None:  # the transient starts from the last state SIMPLE wrote (its start-up's)
+            status["reason"] = diverged
+        else:
+            converged = _residual_plateau(case_dir, state, status, run, ranks, prof, main, logs)
+    return SteadyResult(converged, main, logs)
+
+
+def _run_simple(
+    case_dir: Path, state: dict[str, Any], status: dict[str, Any], run: _Runner, ranks: int, logs: list[Path]
+) -> tuple[dict[str, Any], str | None]:
+    """simpleFoam start-up (``startup_iterations`` at ``startup_scheme``, no residualControl) and
+    main stage (up to ``max_iterations``); their logs appended to ``logs``.
+
+    Returns the main stage's parsed log and, when it diverged and the transient fallback will take
+    over, the divergence in words (else None); raises :class:`Stop` for any other failure.
+    """
+    sol = state["cfd"]["solver"]
+    n_start = int(sol["startup_iterations"])
+    if n_start > 0:
+        render_files(
+            case_dir, state, STAGE_FILES, end_time=n_start, div_scheme=sol["startup_scheme"], residual_control=False
+        )
+        r = run(["simpleFoam"], "simpleFoam.startup", ranks)
+        logs.append(case_dir / "logs" / "log.simpleFoam.startup")
+        if r.returncode != 0:
+            raise Stop(_solver_failure(logs[-1], "start-up"), "simpleFoam.startup")
+    render_files(case_dir, state, STAGE_FILES, end_time=int(sol["max_iterations"]))
+    r = run(["simpleFoam"], "simpleFoam", ranks)
+    logs.append(case_dir / "logs" / "log.simpleFoam")
+    main = parse_solver_log(logs[-1])
+    status["solver_log"] = _log_summary(main, logs[-1])
+    if r.returncode == 0:
+        return main, None
+    failure = _solver_failure(logs[-1], "main")
+    if sol.get("fallback") != "transient" or "diverged" not in failure:
+        collect(case_dir, status, logs, state)
+        raise Stop(failure, "simpleFoam")
+    return main, failure  # steady SIMPLE blew up; an unsteady flow may still have a time average
+
+
+def _residuals_converged(
+    case_dir: Path,
+    state: dict[str, Any],
+    status: dict[str, Any],
+    logs: list[Path],
+    main: dict[str, Any],
+    diverged: str | None,
+) -> bool:
+    """Did the main stage meet residualControl (its message, or the last residuals below the
+    tolerance)? Fills ``converged``, ``criterion_used`` and ``fields`` of ``status``; raises
+    :class:`Stop` when the log holds no iteration to judge (and nothing to start a transient from)."""
+    last = main["rows"][-1] if main["rows"] else {}
+    tol = float(state["cfd"]["solver"]["tolerance"])
+    if diverged is None and not last and not main["converged_message"]:
+        # nothing to judge convergence on, and nothing to start a transient run from: say so
+        collect(case_dir, status, logs, state)
+        raise Stop(
+            f"no SIMPLE iteration could be read from logs/log.simpleFoam ({main['time_lines']} time lines, "
+            "none with residuals): unrecognised solver output, convergence unknown; fallback not run",
+            "simpleFoam",
+        )
+    converged = diverged is None and bool(
+        main["converged_message"] or (last.get("p", 1) < tol and last.get("U", 1) < tol)
+    )
+    status["converged"] = converged
+    status["criterion_used"] = "residualControl" if converged else "none"
+    status["fields"] = {"U": "U", "p": "p", "WSS": "wallShearStress", "time_averaged": False}
+    return converged
+
+
+def _residual_plateau(
+    case_dir: Path,
+    state: dict[str, Any],
+    status: dict[str, Any],
+    run: _Runner,
+    ranks: int,
+    prof: dict[str, Any],
+    main: dict[str, Any],
+    logs: list[Path],
+) -> bool:
+    """SIMPLE stopped above the tolerance: the reason, then :func:`_plateau_check` (its log
+    appended to ``logs``). True when the extra iterations converged or showed a plateau (then
+    ``status`` says so and has no reason)."""
+    last = main["rows"][-1] if main["rows"] else {}
+    tol = float(state["cfd"]["solver"]["tolerance"])
+    status["reason"] = (
+        f"SIMPLE did not reach initial residuals < {tol:g} in {int(last.get('time', 0))} "
+        f"iterations (last p {last.get('p', float('nan')):.3g}, U {last.get('U', float('nan')):.3g})"
+    )
+    plateau = _plateau_check(case_dir, state, status, run, ranks, prof, last)
+    if plateau.get("log"):
+        logs.append(plateau.pop("log"))
+    if plateau.get("converged_by") is not None:
+        status["converged"] = True
+        status["criterion_used"] = plateau["converged_by"]
+        status["reason"] = None
+        return True
+    if plateau.get("ran"):
+        status["reason"] += f"; plateau check ({status['plateau']['iterations']} more iterations): "
+        status["reason"] += status["plateau"]["why"]
+    return False
 
 
 def _plateau_check(
