@@ -12,8 +12,11 @@ Public API::
 
 Modules: :mod:`vcs.cfd.openfoam` (defaults, flavour table, detection, templates),
 :mod:`vcs.cfd.sizing` (cell size from the vessel, bounded background box, per-patient inflow),
-:mod:`vcs.cfd.case` (rendering, inlet profile), :mod:`vcs.cfd.run` (meshing, patch check,
-solving, status),
+:mod:`vcs.cfd.case` (rendering, inlet profile), :mod:`vcs.cfd.run` (run_case: the stages of a
+run, composed), :mod:`vcs.cfd.utilities` (running OpenFOAM utilities: process groups, signals,
+timeouts, failure reasons), :mod:`vcs.cfd.meshing` (meshing, checkMesh, patch check),
+:mod:`vcs.cfd.steady` (SIMPLE, the plateau check), :mod:`vcs.cfd.transient` (the transient
+fallback, its stationarity test), :mod:`vcs.cfd.status` (collecting ``status.json``),
 :mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
 """

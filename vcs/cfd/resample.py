@@ -55,7 +55,7 @@ log = logging.getLogger(__name__)
 # ---------------------------------------------------------------------------------------------
 # Reading a case
 # ---------------------------------------------------------------------------------------------
-# The time-averaged fields of vcs.cfd.run's transient fallback (fieldAverage) and the names they
+# The time-averaged fields of vcs.cfd.transient's fallback (fieldAverage) and the names they
 # are sampled under, so that fields.npz keeps U, p, WSS whatever the case was.
 TIME_AVERAGED = {"U": "UMean", "p": "pMean", "wallShearStress": "wallShearStressMean"}
 TAWSS_FIELD = "magWallShearStressMean"  # time average of |WSS| (TAWSS)

@@ -40,7 +40,7 @@ def run(main, snakemake, log: logging.Logger) -> None:
     except (VCSInputError, FileNotFoundError) as exc:  # a plain ValueError is a bug: traceback below
         log.error("%s", " ".join(str(exc).split()))
         sys.exit(2)
-    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: solvers already stopped by vcs.cfd.run
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: solvers already stopped by vcs.cfd.utilities
         log.error("interrupted (%s): this job's outputs are incomplete and will be recomputed", exc or "SIGINT")
         sys.exit(130)
     except Exception:  # a bug: keep the traceback
