@@ -992,7 +992,7 @@ def test_residual_plateau_is_steady_and_a_too_strict_check_is_not(tmp_path):
             "solver": {
                 "tolerance": 1.0e-12,
                 "max_iterations": 400,
-                "plateau": {"iterations": 60, "max_residual": 1.0e-3, "tolerance": 1.0e-4},
+                "plateau": {"iterations": 60, "max_residual": 1.0e-3, "tolerance": 1.0e-4, "early_stop": False},
             },
         },
     )
@@ -1019,6 +1019,43 @@ def test_residual_plateau_is_steady_and_a_too_strict_check_is_not(tmp_path):
     assert pl["stationary"] is False and pl["why"].startswith("still changing:"), pl
     assert st["reason"].startswith("SIMPLE did not reach initial residuals < 1e-12 in 400 iterations")
     assert "; plateau check (60 more iterations): still changing: " in st["reason"]
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_simple_stops_as_soon_as_its_residuals_level_off(tmp_path):
+    """Issue 23: SIMPLE ran all of max_iterations before the plateau check even when its residuals
+    had levelled off long before. The same Poiseuille tube with an unreachable tolerance (1e-12)
+    and max_iterations 3000: the main stage is stopped once p and U fell by less than x1.5 over
+    the 60-iteration window (stopAt writeNow), the plateau check runs from there, the patient is
+    converged (residual_plateau), with the same pressure drop as a run to iteration 400 without
+    the early stop (within the plateau tolerance), in far fewer iterations than 3000."""
+    stl = _tube(tmp_path)
+    base = deep_merge(
+        POIS_CFG,
+        {
+            "mesh": {"cell_size": 2.0e-3, "layers": 0},
+            "solver": {
+                "tolerance": 1.0e-12,
+                "plateau": {"iterations": 60, "max_residual": 1.0e-3, "tolerance": 1.0e-4},
+            },
+        },
+    )
+    full = deep_merge(base, {"solver": {"max_iterations": 400, "plateau": {"early_stop": False}}})
+    early = deep_merge(base, {"solver": {"max_iterations": 3000, "plateau": {"early_stop": True}}})
+    render_case(tmp_path / "full", stl, full, flavour="esi")
+    ref = run_case(tmp_path / "full", ranks=1)
+    render_case(tmp_path / "early", stl, early, flavour="esi")
+    st = run_case(tmp_path / "early", ranks=1)
+    stop = st["plateau_early_stop"]
+    assert st["converged"] is True and st["criterion_used"] == "residual_plateau", (st["reason"], st.get("plateau"))
+    assert 120 <= stop["iteration"] < 3000 and max(stop["decline_factor"].values()) < 1.5, stop
+    written = int(st["plateau"]["from_iteration"])  # the solver reads the stop at its next iteration(s)
+    assert stop["iteration"] <= written < stop["iteration"] + 50
+    assert st["iterations"] == written + 60 and "stopped early" in st["criterion"]
+    dp = st["inlet_minus_outlet_pressure"]["Pa"]
+    assert dp == pytest.approx(ref["inlet_minus_outlet_pressure"]["Pa"], rel=1e-3)
+    assert "plateau_early_stop" not in ref
 
 
 def test_plateau_pressure_change_sees_a_limit_cycle():

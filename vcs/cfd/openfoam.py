@@ -99,6 +99,7 @@ DEFAULTS: dict[str, Any] = {
             "iterations": 100,  # extra SIMPLE iterations compared with the last state (0 = no check)
             "max_residual": 1.0e-3,  # only when the last initial residuals of p and U are below this
             "tolerance": 1.0e-4,  # steady: dp, mean |WSS| and U (volume L2) change by less (relative)
+            "early_stop": True,  # stop the main stage as soon as its residuals level off (not at max_iterations)
         },
         "fallback": "transient",  # none | transient: if SIMPLE does not converge, run pimpleFoam
         # from the SIMPLE state and report time averages (converged only when stationary)
@@ -266,12 +267,14 @@ def check_cfd(cfd: dict[str, Any]) -> None:
         )
     _number(cfd, "solver.plateau.max_residual", 0.0, 1.0e-2, lo_open=True)
     _number(cfd, "solver.plateau.tolerance", 0.0, 1.0e-2, lo_open=True)
-    unknown = set(cfd["solver"].get("plateau") or {}) - {"iterations", "max_residual", "tolerance"}
+    unknown = set(cfd["solver"].get("plateau") or {}) - {"iterations", "max_residual", "tolerance", "early_stop"}
     if unknown:
         raise VCSInputError(
             f"unknown key(s) in cfd.solver.plateau: {', '.join(sorted(unknown))}; "
-            "known: iterations, max_residual, tolerance"
+            "known: iterations, max_residual, tolerance, early_stop"
         )
+    if not isinstance((cfd["solver"].get("plateau") or {}).get("early_stop", False), bool):
+        raise VCSInputError("cfd.solver.plateau.early_stop must be true or false")
     _number(cfd, "mesh.layers", 0, 20)
     _number(cfd, "mesh.max_boundary_skewness", 0.0, 100.0, lo_open=True)
     _number(cfd, "mesh.jet_refinement.cells_across", 1, 100)

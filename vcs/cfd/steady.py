@@ -4,6 +4,8 @@ when the solution no longer changes). Also the convergence criterion in words.""
 
 from __future__ import annotations
 
+import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,7 +16,7 @@ from numpy.typing import NDArray
 from vcs.cfd.case import render_files
 from vcs.cfd.foamfiles import function_series, parse_solver_log, read_internal_field
 from vcs.cfd.status import _log_summary, _wall_faces, _wall_values, collect
-from vcs.cfd.utilities import Stop, _Runner, _solver_failure, _time_dirs
+from vcs.cfd.utilities import Stop, _Runner, _solver_failure, _time_dirs, progress
 
 # the files every solver stage renders again (end time, schemes, residual control, averaging)
 STAGE_FILES = ["system/controlDict", "system/fvSchemes", "system/fvSolution"]
@@ -104,10 +106,13 @@ def _run_simple(
         if r.returncode != 0:
             raise Stop(_solver_failure(logs[-1], "start-up"), "simpleFoam.startup")
     render_files(case_dir, state, STAGE_FILES, end_time=int(sol["max_iterations"]))
-    r = run(["simpleFoam"], "simpleFoam", ranks)
+    watch = PlateauWatch(case_dir, sol)
+    r = run(["simpleFoam"], "simpleFoam", ranks, watch=watch if watch.enabled else None)
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = parse_solver_log(logs[-1])
     status["solver_log"] = _log_summary(main, logs[-1])
+    if watch.stopped_at is not None:
+        status["plateau_early_stop"] = watch.report()
     if r.returncode == 0:
         return main, None
     failure = _solver_failure(logs[-1], "main")
@@ -115,6 +120,78 @@ def _run_simple(
         collect(case_dir, status, logs, state)
         raise Stop(failure, "simpleFoam")
     return main, failure  # steady SIMPLE blew up; an unsteady flow may still have a time average
+
+
+class PlateauWatch:
+    """Stops the main SIMPLE stage as soon as its residuals have levelled off (read from its log
+    while it runs), instead of after ``max_iterations``: the plateau check then decides.
+
+    Levelled off: at least twice ``plateau.iterations`` iterations ran, the initial residuals of p and U
+    stayed below ``plateau.max_residual`` over the last ``plateau.iterations`` of them, and
+    neither fell by more than a factor :data:`EARLY_STOP_DECLINE` across that window (geometric
+    means of its first and last tenth). A run still converging (residuals falling by a decade per
+    few hundred iterations) is left alone, to meet residualControl. The stop: ``stopAt writeNow``
+    in system/controlDict, read by the solver at its next iteration (``runTimeModifiable``), which
+    writes that state and ends normally (the file's time stamp is moved past OpenFOAM's
+    ``fileModificationSkew`` so that the change is seen at once).
+    """
+
+    def __init__(self, case_dir: Path, sol: dict[str, Any]) -> None:
+        pl = sol.get("plateau") or {}
+        self.control = case_dir / "system" / "controlDict"
+        self.window = int(pl.get("iterations", 0))
+        self.max_residual = float(pl.get("max_residual", 0.0))
+        self.enabled = bool(pl.get("early_stop", False)) and self.window > 0
+        self.stopped_at: int | None = None
+        self.decline: dict[str, float] = {}
+
+    def __call__(self, log: Path) -> None:
+        """Read the log; once levelled off, ask the solver to write and stop (once)."""
+        if self.stopped_at is not None or not log.exists():
+            return
+        rows = [r for r in parse_solver_log(log)["rows"] if "p" in r and "U" in r]
+        if len(rows) < 2 * self.window:
+            return
+        win = rows[-self.window :]
+        if not max(max(r["p"], r["U"]) for r in win) < self.max_residual:
+            return
+        k = max(self.window // 10, 1)
+        decline = {
+            f: float(np.mean(np.log10([r[f] for r in win[:k]])) - np.mean(np.log10([r[f] for r in win[-k:]])))
+            for f in ("p", "U")
+        }
+        if max(decline.values()) < np.log10(EARLY_STOP_DECLINE):
+            before = self.control.stat().st_mtime
+            text = self.control.read_text()
+            self.control.write_text(text.replace("stopAt          endTime;", "stopAt          writeNow;", 1))
+            # OpenFOAM sees a file as changed only when its time stamp moved by more than
+            # fileModificationSkew (10 s by default): stamp it a minute on
+            os.utime(self.control, (time.time(), max(time.time(), before + 60.0)))
+            self.stopped_at, self.decline = int(win[-1]["time"]), decline
+            progress.info(
+                "SIMPLE residuals levelled off at iteration %d (p %.3g, U %.3g; fell by x%.2f, x%.2f over %d): "
+                "stopping it for the plateau check",
+                self.stopped_at,
+                win[-1]["p"],
+                win[-1]["U"],
+                10 ** decline["p"],
+                10 ** decline["U"],
+                self.window,
+            )
+
+    def report(self) -> dict[str, Any]:
+        """status.json ``plateau_early_stop``: where it stopped and the decline over the window."""
+        return {
+            "iteration": self.stopped_at,
+            "window": self.window,
+            "decline_factor": {f: float(10**v) for f, v in self.decline.items()},
+            "max_decline_factor": EARLY_STOP_DECLINE,
+        }
+
+
+EARLY_STOP_DECLINE = 1.5
+"""Largest fall (factor) of the p and U residuals over the plateau window at which the main SIMPLE
+stage is stopped early (:class:`PlateauWatch`)."""
 
 
 def _residuals_converged(
@@ -358,6 +435,11 @@ def _criterion_text(sol: dict[str, Any]) -> str:
             f"first value at every one of them, and mean |WSS| and U (volume L2) changed by < "
             f"{100 * pl['tolerance']:g} %"
         )
+        if pl.get("early_stop"):
+            txt += (
+                f" (the main stage stopped early once the residuals, below {pl['max_residual']:g}, fell by less "
+                f"than x{EARLY_STOP_DECLINE:g} over {int(pl['iterations'])} iterations)"
+            )
     if sol.get("fallback") == "transient":
         tr = sol["transient"]
         txt += (

@@ -11,6 +11,7 @@ import re
 import signal
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -39,14 +40,32 @@ class Stop(Exception):
 
 
 def _run_group(
-    cmd: list[str], cwd: Path, env: dict[str, str], out: Any, timeout: float | None
+    cmd: list[str],
+    cwd: Path,
+    env: dict[str, str],
+    out: Any,
+    timeout: float | None,
+    watch: Callable[[], object] | None = None,
+    poll_s: float = 2.0,
 ) -> subprocess.CompletedProcess[bytes]:
     """Run ``cmd`` in its own process group and wait; on a timeout, Ctrl-C (KeyboardInterrupt) or
     any other exit of the caller, stop the WHOLE group (mpirun and every rank: SIGTERM, then
-    SIGKILL after 5 s) before re-raising, so that no solver keeps running after its job ended."""
+    SIGKILL after 5 s) before re-raising, so that no solver keeps running after its job ended.
+    ``watch``, when given, is called every ``poll_s`` seconds while the command runs (e.g. to
+    read its log and ask the solver to stop)."""
     proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     try:
-        return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=timeout))
+        if watch is None:
+            return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=timeout))
+        end = None if timeout is None else time.monotonic() + timeout
+        while True:
+            wait = poll_s if end is None else min(poll_s, max(end - time.monotonic(), 0.0))
+            try:
+                return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=wait))
+            except subprocess.TimeoutExpired:
+                if end is not None and time.monotonic() >= end:
+                    raise
+                watch()
     except BaseException:
         stop_group(proc)
         raise
@@ -78,11 +97,14 @@ class _Runner:
         self.timeout = timeout
         self.env = foam_env()
 
-    def __call__(self, args: list[str], log: str, ranks: int = 1) -> subprocess.CompletedProcess[bytes]:
+    def __call__(
+        self, args: list[str], log: str, ranks: int = 1, watch: Callable[[Path], object] | None = None
+    ) -> subprocess.CompletedProcess[bytes]:
         """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9,
         an executable that cannot be started 127. Never raises, except when the caller is interrupted
         (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the workflow scripts): then the
-        utility's whole process group is stopped first."""
+        utility's whole process group is stopped first. ``watch(log file)`` is called every 2 s
+        while it runs."""
         cmd = list(args)
         if ranks > 1:
             mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
@@ -98,7 +120,10 @@ class _Runner:
             fh.write(f"# {' '.join(cmd)}\n")
             fh.flush()
             try:
-                r = _run_group(cmd, self.case, self.env, fh, self.timeout)
+                log_file = self.logs / f"log.{log}"
+                r = _run_group(
+                    cmd, self.case, self.env, fh, self.timeout, None if watch is None else lambda: watch(log_file)
+                )
             except subprocess.TimeoutExpired:
                 r = subprocess.CompletedProcess(cmd, returncode=-9)
                 fh.write(f"\n# vcsflow: timeout after {self.timeout} s\n")
