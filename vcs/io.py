@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vcs._signals import signals_held
 from vcs.errors import VCSInputError
 from vcs.mesh import connected_faces, consistent_winding, default_vessel_component, lumen_chords, triangle_cross
 
@@ -236,12 +237,13 @@ def _read_ascii_stl_solids(path: Path) -> pv.PolyData:
 def _read_polydata(path: Path) -> pv.PolyData:
     """Read any pyvista-readable surface file as PolyData (VTK reader errors -> VCSInputError)."""
     import pyvista as pv
-    import vtk
+    from vtkmodules.vtkCommonCore import vtkObject  # not `import vtk`: that loads all of VTK's ~250 modules
 
-    vtk.vtkObject.GlobalWarningDisplayOff()  # reader errors become our one-line message
+    vtkObject.GlobalWarningDisplayOff()  # reader errors become our one-line message
 
     try:
-        mesh = _read_ascii_stl_solids(path) if _is_ascii_stl(path) else pv.read(str(path))
+        with signals_held():  # pyvista imports VTK's reader modules lazily: a Ctrl-C there is a SIGSEGV
+            mesh = _read_ascii_stl_solids(path) if _is_ascii_stl(path) else pv.read(str(path))
     except Exception as exc:  # VTK readers raise many kinds of errors
         raise VCSInputError(
             f"cannot read '{path}' as a surface mesh ({type(exc).__name__}); "

@@ -18,15 +18,14 @@ import os
 import re
 import secrets
 import shutil
-import signal
 import tempfile
-import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from vcs._signals import signals_held
 from vcs.errors import VCSInputError
 
 PathLike = str | Path
@@ -484,7 +483,7 @@ class OutputFolder:
                 self._discard()
                 raise RuntimeError(f"vcs {self.command} did not write {', '.join(missing)}")
             try:
-                with _signals_held():
+                with signals_held():
                     for name in self.names:
                         if name in self._staged:
                             os.replace(self._staged[name], self.path / name)
@@ -533,20 +532,6 @@ def _remove_dead_stages(path: Path, command: str) -> None:
             m = pattern.match(e.name)
             if m is not None and e.is_dir(follow_symlinks=False) and not _process_exists(int(m.group(1))):
                 shutil.rmtree(e.path, ignore_errors=True)
-
-
-@contextmanager
-def _signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back (delivered on exit) around a few renames that belong together."""
-    held = {signal.SIGINT, signal.SIGTERM}
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 import threading
@@ -15,6 +16,7 @@ import warnings
 from collections.abc import Sequence
 from typing import NoReturn
 
+from vcs._signals import signals_held
 from vcs.cli._args import join_point_values
 from vcs.cli.ends import add_commands as add_ends_commands
 from vcs.cli.fit import add_commands as add_fit_commands
@@ -138,6 +140,31 @@ def _terminate_as_interrupt() -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
+def _import_heavy_modules() -> None:
+    """Import the C-extension modules the commands use (VTK's readers, writers and filters that
+    pyvista would load lazily, scipy's, trimesh), so that none is imported while a command runs."""
+    import importlib
+
+    for name in (
+        "pyvista",
+        "vtkmodules.vtkCommonCore",
+        "vtkmodules.vtkCommonDataModel",
+        "vtkmodules.vtkFiltersCore",
+        "vtkmodules.vtkFiltersGeneral",
+        "vtkmodules.vtkIOGeometry",
+        "vtkmodules.vtkIOLegacy",
+        "vtkmodules.vtkIOPLY",
+        "vtkmodules.vtkIOXML",
+        "scipy.interpolate",
+        "scipy.ndimage",
+        "scipy.sparse.csgraph",
+        "scipy.spatial",
+        "trimesh",
+        "vcs.vessel",
+    ):
+        importlib.import_module(name)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the `vcs` command line.
 
@@ -160,6 +187,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     args = parse_args(argv)
     _terminate_as_interrupt()
+    with signals_held():  # a Ctrl-C inside a C extension's import crashes Python (SIGSEGV) or
+        _import_heavy_modules()  # leaves a half-imported module: import them all first, held
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
@@ -189,7 +218,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"{prefix}: {what} just after its outputs were complete; they are in place", file=sys.stderr)
             else:
                 print(f"{prefix}: {what}; no partial output left behind, earlier outputs kept", file=sys.stderr)
-            return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+            code = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+            if argv is None:  # the program itself: everything is cleaned up and said; skip the
+                # interpreter's teardown, where VTK objects left mid-way have crashed it (SIGSEGV)
+                sys.stdout.flush()
+                sys.stderr.flush()
+                os._exit(code)
+            return code
         except Exception as exc:  # a bug, not bad input: one line, the traceback only with -v
             if args.verbose:
                 raise
