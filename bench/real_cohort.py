@@ -31,19 +31,30 @@ REPO = Path(__file__).resolve().parents[1]
 JOBS = ("vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample")
 
 
-def sheet(dst: Path) -> list[str]:
-    """config/real_patients.tsv with its ../shared paths made absolute, written to ``dst``."""
+def real_rows() -> list[dict[str, str]]:
+    """The rows of config/real_patients.tsv with its ../shared paths made absolute."""
     lines = [ln for ln in (REPO / "config" / "real_patients.tsv").read_text().splitlines() if not ln.startswith("#")]
     rows = list(csv.DictReader(lines, delimiter="\t"))
     for r in rows:
         for k in ("mesh", "inlet_cap", "outlet_cap"):
             if r[k]:
                 r[k] = str((REPO / r[k]).resolve())
+    return rows
+
+
+def write_rows(dst: Path, rows: list[dict[str, str]]) -> list[str]:
+    """``rows`` as a patients sheet (TSV, the union of their columns, empty cells for the rest)."""
+    cols = list(dict.fromkeys(k for r in rows for k in r))
     with open(dst, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]), delimiter="\t", lineterminator="\n")
+        w = csv.DictWriter(fh, fieldnames=cols, delimiter="\t", lineterminator="\n", restval="")
         w.writeheader()
         w.writerows(rows)
     return [r["id"] for r in rows]
+
+
+def sheet(dst: Path) -> list[str]:
+    """config/real_patients.tsv with its ../shared paths made absolute, written to ``dst``."""
+    return write_rows(dst, real_rows())
 
 
 def run_workflow(wd: Path, configs: list[str], patients: str, cores: int, title: str) -> subprocess.CompletedProcess:

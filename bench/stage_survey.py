@@ -26,7 +26,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "bench"))
 sys.path.insert(0, str(REPO / "tests" / "vcs"))
-from real_cohort import run_workflow  # noqa: E402
+from real_cohort import real_rows, run_workflow, write_rows  # noqa: E402
 
 DATA = REPO.parent / "shared" / "data" / "vessels"
 EXTRA = [  # the two shared meshes config/real_patients.tsv leaves out (ends as tests/vcs/test_real_vessels.py)
@@ -62,19 +62,7 @@ def synthetic(meshes: Path) -> list[dict]:
 
 
 def write_sheet(wd: Path) -> list[str]:
-    lines = [ln for ln in (REPO / "config" / "real_patients.tsv").read_text().splitlines() if not ln.startswith("#")]
-    rows = list(csv.DictReader(lines, delimiter="\t"))
-    for r in rows:
-        for k in ("mesh", "inlet_cap", "outlet_cap"):
-            if r[k]:
-                r[k] = str((REPO / r[k]).resolve())
-    rows += EXTRA + synthetic(wd / "meshes")
-    cols = list(dict.fromkeys(k for r in rows for k in r))
-    with open(wd / "patients.tsv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols, delimiter="\t", lineterminator="\n", restval="")
-        w.writeheader()
-        w.writerows(rows)
-    return [r["id"] for r in rows]
+    return write_rows(wd / "patients.tsv", real_rows() + EXTRA + synthetic(wd / "meshes"))
 
 
 def row(res: Path, pid: str, atlas: dict) -> str:
