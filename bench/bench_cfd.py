@@ -96,13 +96,14 @@ def main(argv=None) -> int:
         )
         tr = st.get("transient")
         if tr and tr.get("evaluated"):  # the transient fallback ran: its window and verdict
-            d = tr["half_window_differences"]
+            d = tr["relative_errors"]
             print(
                 f"{'':<24} transient: {sum(tr['time_steps'].values())} steps (Co max {tr['courant_max']:.3g}), "
                 f"window {tr['window_s']:.4g} s = {tr['window_flow_throughs']:.3g} flow-throughs after "
-                f"{tr['washout_s']:.3g} s wash-out; half-window differences "
+                f"{tr['washout_s']:.3g} s wash-out; {100 * tr['confidence']:g} % half-widths "
                 f"dp {100 * d['inlet_minus_outlet_pressure']:.2g} %, "
-                f"TAWSS {100 * d['tawss_mean']:.2g} %, U {100 * d['U_L2']:.2g} %; stationary {tr['stationary']}",
+                f"TAWSS {100 * d['tawss_mean']:.2g} %, U {100 * d.get('U', float('nan')):.2g} %; "
+                f"stationary {tr['stationary']}",
                 flush=True,
             )
         out.append(st)

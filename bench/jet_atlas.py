@@ -9,7 +9,7 @@ benchmark files, and the atlas's field sources and explained variances.
 Needs OpenFOAM; ~3 hours on 2 cores (5.4 CPU hours of solver) (README, "An atlas of jet patients"). DIR (default: a
 temporary folder) is the Snakemake working directory; a finished DIR is only re-read. Prints, per
 patient: cells, jet cells across, layer coverage, SIMPLE iterations, flow-through time, wash-out +
-window, pimpleFoam time steps and their size, the half-window differences of the stationarity
+window, pimpleFoam time steps and their size, the relative error bars (95 % half-widths) of the
 test, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers (their
 logs' ExecutionTime), the patient's wall time (the five workflow jobs) and the verdict; then the
 atlas. A patient that failed gets '-' where it has no figure and its reason.
@@ -58,8 +58,8 @@ def row(res: Path, pid: str) -> str:
         wall_min = "-"
     cpu_h = solver_cpu_s(res / "patients" / pid / "case") / 3600
     jet = m.get("jet_refinement") or {}
-    d = tr.get("half_window_differences") or {}
-    halves = " / ".join(f"{100 * d[k]:.2g}" for k in ("inlet_minus_outlet_pressure", "tawss_mean", "U_L2") if k in d)
+    d = tr.get("relative_errors") or {}
+    halves = " / ".join(f"{100 * d[k]:.2g}" for k in ("inlet_minus_outlet_pressure", "tawss_mean", "U") if k in d)
     steps = tr.get("time_steps") or {}
     dt = tr.get("delta_t_s") or {}
     tawss, osi = st.get("tawss_Pa") or {}, st.get("osi") or {}
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         res = wd / "results"
         print(
             "| patient | cells | jet cells across | layer coverage | SIMPLE iterations | flow-through s "
-            "| wash-out + window s | time steps | dt ms | half-window differences % (dp / TAWSS / U) "
+            "| wash-out + window s | time steps | dt ms | 95 % half-widths % (dp / TAWSS / U) "
             "| inlet - outlet pressure Pa | TAWSS mean / max Pa | OSI mean | solver CPU h | patient wall min "
             "| converged |"
         )

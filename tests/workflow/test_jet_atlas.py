@@ -35,7 +35,11 @@ JET_CI = {
             "plateau": {"iterations": 0},  # no steady verdict by plateau: the fallback runs
             "fallback": "transient",  # (config/ci.yaml: none)
             "timeout_s": 900,
-            "transient": {"flow_throughs": WINDOW, "washout_flow_throughs": WASHOUT},
+            "transient": {
+                "min_flow_throughs": WINDOW,
+                "max_flow_throughs": 2 * WINDOW,
+                "washout_flow_throughs": WASHOUT,
+            },
         },
     },
 }
@@ -65,7 +69,7 @@ def test_atlas_of_jet_patients_from_time_averages(tmp_path, workdir_factory, rep
     q = VELOCITY * VALVE_AREA
     for s, st in statuses.items():
         assert st is not None
-        # SIMPLE did not converge; the time average did, by the stationarity of its two halves
+        # SIMPLE did not converge; the time average did: its means known to the tolerance
         assert st["converged"] is True and st["criterion_used"] == "time_average_stationary", report
         assert st["iterations"] == 120 and "steady_not_converged" in st["transient"]
         assert st["inflow"]["flow_rate_m3_s"] == pytest.approx(q)
@@ -73,7 +77,7 @@ def test_atlas_of_jet_patients_from_time_averages(tmp_path, workdir_factory, rep
         # window and wash-out in flow-through times of this patient: lumen volume / Q
         assert tr["flow_through_time_s"] == pytest.approx(st["lumen_volume_m3"] / q)
         assert 1.0e-4 < st["lumen_volume_m3"] < 5.0e-4  # a demo aorta: 100-500 cm3
-        assert tr["window_flow_throughs"] == pytest.approx(WINDOW, rel=0.01)
+        assert WINDOW * 0.99 <= tr["window_flow_throughs"] <= 2 * WINDOW * 1.01
         assert tr["washout_flow_throughs"] == pytest.approx(WASHOUT, rel=0.01)
         assert tr["stationary"] is True and tr["time_steps"]["average"] > 10
         assert st["fields"]["time_averaged"] is True and st["wall_shear_stress_Pa"]["field"] == "wallShearStressMean"
@@ -88,6 +92,8 @@ def test_atlas_of_jet_patients_from_time_averages(tmp_path, workdir_factory, rep
     atlas = json.loads((res / "atlas" / "atlas.json").read_text())
     assert atlas["patients_included"] == [f"demo_aorta_{s}" for s in SEEDS] and atlas["patients_excluded"] == []
     assert atlas["field_sources"] == {f"demo_aorta_{s}": "time_average" for s in SEEDS}
+    # the atlas records each time average's error bars, as its status.json has them
+    assert atlas["time_average_errors"] == {f"demo_aorta_{s}": statuses[s]["time_average_errors"] for s in SEEDS}
     assert set(atlas["flow_explained_variance"]) == {"U", "p", "WSS"}
     # the README's table (bench/jet_atlas.py) reads every figure it prints from these results
     sys.path.insert(0, str(REPO / "bench"))

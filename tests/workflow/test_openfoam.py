@@ -13,7 +13,7 @@ import pytest
 from model_phantoms import narrowed_model  # tests/ (on sys.path by conftest): vessels with exact sections
 
 from vcs.cfd import DEFAULTS, detect_openfoam, render_case, run_case, sample_case
-from vcs.cfd.case import jet_region, render_files
+from vcs.cfd.case import CASE_JSON, jet_region, render_files
 from vcs.cfd.foamfiles import (
     function_series,
     parse_layer_summary,
@@ -23,6 +23,7 @@ from vcs.cfd.foamfiles import (
 )
 from vcs.cfd.openfoam import deep_merge
 from vcs.cfd.run import STAGE_FILES, transient_plan
+from vcs.cfd.status import _wall_faces, _wall_values
 from vcs.cfd.verification import local_error_stats, poiseuille_wall_shear_stress
 from vcs.errors import VCSInputError
 from vcs.phantoms.analytic import write_closed_tube_stl
@@ -419,7 +420,7 @@ JET_CFG = {
         "max_iterations": 20,
         "startup_iterations": 5,
         "fallback": "transient",
-        "transient": {"flow_throughs": 0.3, "washout_flow_throughs": 0.15},
+        "transient": {"min_flow_throughs": 0.3, "max_flow_throughs": 0.3, "washout_flow_throughs": 0.15},
     },
 }
 
@@ -588,7 +589,8 @@ def test_render_jet_mesh_and_transient_stages(tmp_path, flavour):
 def test_paper_config_is_the_papers_jet(tmp_path):
     """config/paper.yaml over config/config.yaml (as ``--configfile`` merges it) is valid and is the
     paper's set-up (Section 2.4.1): 1.2 m/s over 1 cm2 (Q 1.2e-4 m3/s), nu 3.37e-6 m2/s, steady
-    SIMPLE to 1e-5 first, the transient time average over >= 10 flow-through times otherwise."""
+    SIMPLE to 1e-5 first, the transient time average otherwise, known to its tolerance within
+    2-20 flow-through times."""
     import yaml
     from snakemake.utils import validate
 
@@ -601,8 +603,8 @@ def test_paper_config_is_the_papers_jet(tmp_path):
     cfd = cfg["cfd"]
     assert cfd["inlet"] == {**cfd["inlet"], "type": "jet", "velocity": 1.2, "valve_area": 1.0e-4, "flow_rate": None}
     assert cfd["physics"]["nu"] == pytest.approx(3.37e-6) and cfd["solver"]["tolerance"] == pytest.approx(1e-5)
-    # 10 flow-through times: 5 were not stationary in U on demo aorta seed 3 (README, measured)
-    assert cfd["solver"]["fallback"] == "transient" and cfd["solver"]["transient"]["flow_throughs"] >= 10
+    tr = cfd["solver"]["transient"]
+    assert cfd["solver"]["fallback"] == "transient" and tr["min_flow_throughs"] >= 2 and tr["max_flow_throughs"] >= 20
     assert cfd["mesh"]["layers"] > 0 and cfd["mesh"]["jet_refinement"]["enabled"]
     cfd.pop("flavour")
     state = render_case(tmp_path / "paper", _tube(tmp_path), cfd, flavour="esi")
@@ -625,7 +627,7 @@ def test_paper_atlas_config_keeps_the_jet_at_level_1(tmp_path):
     validate(cfg, str(repo / "workflow" / "schemas" / "config.schema.yaml"))
     cfd = cfg["cfd"]
     assert cfd["inlet"]["velocity"] == 1.2 and cfd["inlet"]["valve_area"] == 1.0e-4
-    assert cfd["solver"]["transient"]["flow_throughs"] == 10 and cfd["mesh"]["layers"] > 0
+    assert cfd["solver"]["transient"]["max_flow_throughs"] == 20 and cfd["mesh"]["layers"] > 0
     sheet = repo / cfg["patients"]
     rows = list(csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t"))
     assert [(r["id"], r["mesh"]) for r in rows] == [
@@ -647,11 +649,21 @@ def test_bad_cfd_words_and_removed_fallback(tmp_path):
         render_case(tmp_path / "b", stl, {"solver": {"div_scheme": "linear; evil"}}, flavour="esi")
     with pytest.raises(VCSInputError, match="max_co must be a number in"):
         render_case(tmp_path / "c", stl, {"solver": {"transient": {"max_co": 5}}}, flavour="esi")
-    with pytest.raises(VCSInputError, match="flow_throughs must be a number"):
-        render_case(tmp_path / "d", stl, {"solver": {"transient": {"flow_throughs": "5"}}}, flavour="esi")
-    for bad in (1.5, -1, 11, True, "1"):
-        with pytest.raises(VCSInputError, match="max_doublings must be a whole number in"):
-            render_case(tmp_path / "e", stl, {"solver": {"transient": {"max_doublings": bad}}}, flavour="esi")
+    with pytest.raises(VCSInputError, match="min_flow_throughs must be a number"):
+        render_case(tmp_path / "d", stl, {"solver": {"transient": {"min_flow_throughs": "5"}}}, flavour="esi")
+    for bad in (1.5, 0, 11, True, "1"):
+        with pytest.raises(VCSInputError, match="outer_correctors must be a whole number in"):
+            render_case(tmp_path / "e", stl, {"solver": {"transient": {"outer_correctors": bad}}}, flavour="esi")
+    with pytest.raises(VCSInputError, match=r"max_flow_throughs \(2\) must not be below min_flow_throughs \(3\)"):
+        tr = {"min_flow_throughs": 3, "max_flow_throughs": 2}
+        render_case(tmp_path / "f", stl, {"solver": {"transient": tr}}, flavour="esi")
+    with pytest.raises(VCSInputError, match="confidence must be a number in"):
+        render_case(tmp_path / "g", stl, {"solver": {"transient": {"confidence": 1.0}}}, flavour="esi")
+    # the keys of the half-window test of earlier versions: one line naming what replaced them
+    for old in ("flow_throughs", "max_doublings", "stationarity_tolerance", "stationarity_tolerance_U"):
+        with pytest.raises(VCSInputError, match=f"transient.{old} was replaced") as e:
+            render_case(tmp_path / "h", stl, {"solver": {"transient": {old: 1}}}, flavour="esi")
+        assert "\n" not in str(e.value)
 
 
 def test_transient_plan_from_flow_through_time():
@@ -663,11 +675,15 @@ def test_transient_plan_from_flow_through_time():
     plan = transient_plan(state, 2.078e-4, 1000.0, 1.2)
     t_ft = 2.078e-4 / 1.2e-4
     assert plan["flow_through_time_s"] == pytest.approx(t_ft)
-    assert plan["window_s"] == pytest.approx(8.66) and plan["washout_s"] == pytest.approx(1.74)  # rounded up
-    assert plan["window_flow_throughs"] >= 5 and plan["washout_flow_throughs"] >= 1
-    assert plan["averaging_start_time"] == pytest.approx(1001.74) and plan["end_time"] == pytest.approx(1010.4)
-    assert plan["mid_time"] == pytest.approx(1001.74 + 4.33)
+    # defaults: wash-out 1, window 1 to 10 flow-through times, each rounded up to 3 digits
+    assert plan["min_window_s"] == pytest.approx(1.74) and plan["washout_s"] == pytest.approx(1.74)
+    assert plan["max_window_s"] == pytest.approx(17.4)
+    assert plan["min_window_flow_throughs"] >= 1 and plan["washout_flow_throughs"] >= 1
+    assert plan["max_window_flow_throughs"] >= 10
+    assert plan["averaging_start_time"] == pytest.approx(1001.74) and plan["max_end_time"] == pytest.approx(1019.14)
+    assert plan["min_end_time"] == pytest.approx(1001.74 + 1.74)
     assert plan["delta_t_initial_s"] == pytest.approx(1.0 * 1e-3 / 1.2)
+    assert plan["max_delta_t_s"] == pytest.approx(0.02 * t_ft)
 
 
 LAYER_LOG = """Extruding 1211 out of 1246 faces (97.19101124%). Removed extrusion at 3 faces.
@@ -752,18 +768,28 @@ def test_jet_transient_window_and_stationarity(jet_transient):
     assert tr["washout_flow_throughs"] == pytest.approx(0.15, rel=0.01) and tr["washout_flow_throughs"] >= 0.15
     assert tr["end_time"] - tr["averaging_start_time"] == pytest.approx(tr["window_s"])
     assert tr["averaging_start_time"] - tr["start_time"] == pytest.approx(tr["washout_s"])
-    assert float(tr["mid_time_folder"]) == pytest.approx(tr["mid_time"])
-    assert float(tr["end_time_folder"]) == pytest.approx(tr["end_time"])
+    assert float(tr["end_time_folder"]) == pytest.approx(tr["end_time"]) == pytest.approx(tr["max_end_time"])
     assert tr["time_steps"]["washout"] > 10 and tr["time_steps"]["average"] > 20
-    assert 0.5 < tr["courant_max"] <= 1.05  # adjustable time step at max_co = 1
-    # the stationarity test: both halves, the differences, the tolerances
-    diffs, tols = tr["half_window_differences"], tr["tolerances"]
-    assert set(diffs) == set(tols) == {"inlet_minus_outlet_pressure", "tawss_mean", "U_L2"}
-    assert tr["stationary"] is True and all(diffs[k] <= tols[k] for k in diffs)
-    h = tr["halves"]
-    assert h["window"]["tawss_mean_Pa"] == pytest.approx(
-        0.5 * (h["first"]["tawss_mean_Pa"] + h["second"]["tawss_mean_Pa"])
-    )
+    # the time step: the snapped inlet and outlet planes leave slivers whose Courant number is
+    # several times that of the cells the flow crosses; pimpleFoam's limit is raised by that factor
+    cour = tr["courant"]
+    assert cour["end_plane_factor"] > 1.5 and cour["end_plane_cells"] > 0
+    assert cour["pimple_max_co"] == pytest.approx(min(cour["end_plane_factor"], 4.0))
+    assert cour["outer_correctors"] == 2  # above Co 1 somewhere: outer correctors
+    assert 0.5 * cour["pimple_max_co"] < tr["courant_max"] <= 1.02 * cour["pimple_max_co"]
+    # the error bars: every mean known to its tolerance, their statistics recorded
+    rel, tols = tr["relative_errors"], tr["tolerances"]
+    assert set(rel) == set(tols) == {"inlet_minus_outlet_pressure", "tawss_mean", "U"}
+    assert tr["stationary"] is True and all(rel[k] <= tols[k] for k in rel)
+    assert st["time_average_errors"]["relative"] == rel and tr["confidence"] == 0.95
+    stats = tr["statistics"]
+    assert stats["U"]["n_probes"] == 64
+    # the record's mean is fieldAverage's (both time-weighted over the same window)
+    end = case / tr["end_time_folder"]
+    walls = _wall_faces(case, json.loads((case / CASE_JSON).read_text()))
+    area = np.concatenate([a for _, a in walls])
+    tawss_field = (_wall_values(end, "magWallShearStressMean", walls) * area).sum() / area.sum() * 1060.0
+    assert stats["tawss_mean"]["mean_Pa"] == pytest.approx(tawss_field, rel=1e-3)
     # time-averaged results: WSS of the mean vector, TAWSS, OSI, window means of flow and pressure
     assert st["fields"]["time_averaged"] and st["fields"]["U"] == "UMean"
     assert st["wall_shear_stress_Pa"]["field"] == "wallShearStressMean"
@@ -771,13 +797,14 @@ def test_jet_transient_window_and_stationarity(jet_transient):
     assert 0 <= st["osi"]["mean"] <= st["osi"]["max"] <= 0.5
     assert st["mass_imbalance"] < 1e-4
     assert "time-weighted" in st["inlet_minus_outlet_pressure"]["definition"] and "pressure_drop" not in st
-    assert st["inlet_minus_outlet_pressure"]["Pa"] == pytest.approx(h["window"]["inlet_minus_outlet_pressure_Pa"])
+    assert st["inlet_minus_outlet_pressure"]["Pa"] == pytest.approx(
+        stats["inlet_minus_outlet_pressure"]["mean_Pa"], rel=1e-6
+    )
     # the mesh: jet refinement and prism layers, with their coverage
     assert st["mesh"]["jet_refinement"]["level"] == 1 and st["mesh"]["jet_refinement"]["cells_across"] >= 6
     lay = st["mesh"]["layers"]
     assert lay["requested"] == 3 and lay["added"] and 0.5 < lay["coverage"] <= 1.0
     assert 0.5 < lay["extruded_fraction"] <= 1.0
-    end = case / tr["end_time_folder"]
     for f in ("UMean", "pMean", "wallShearStressMean", "magWallShearStressMean", "V", "U", "p"):
         assert (end / f).exists(), f
     assert (case / "transient.png").exists() and (case / "logs" / "log.pimpleFoam.average").exists()
@@ -812,16 +839,18 @@ def test_jet_transient_resampled_from_the_means(jet_transient):
 @pytest.mark.openfoam
 @needs_foam
 def test_jet_transient_too_short_window_is_not_stationary(tmp_path):
-    """A window of 1/50 flow-through right after 3 SIMPLE iterations: the two halves differ;
-    converged false with the reason naming the non-stationarity (run in parallel: decomposed
-    transient stages and reconstructPar of the middle and end times)."""
+    """A longest window of 1/50 flow-through right after 3 SIMPLE iterations: its means are not
+    known to the tolerance (the flow still starts up: fewer than 5 batches of 5 integral time
+    scales, a range far wider than 3 %); converged false with the reason naming the error bars and
+    what to change (run in parallel: decomposed transient stages, the Courant numbers and probe
+    cells read from the processors, reconstructPar of the end)."""
     cfg = deep_merge(
         JET_CFG,
         {
             "solver": {
                 "max_iterations": 3,
                 "startup_iterations": 1,
-                "transient": {"flow_throughs": 0.02, "washout_flow_throughs": 0.0},
+                "transient": {"min_flow_throughs": 0.02, "max_flow_throughs": 0.02, "washout_flow_throughs": 0.0},
             }
         },
     )
@@ -829,14 +858,14 @@ def test_jet_transient_too_short_window_is_not_stationary(tmp_path):
     st = run_case(tmp_path / "short", ranks=2)
     assert st["mesh_ok"] and (tmp_path / "short" / "processor1").is_dir(), st["reason"]
     assert st["converged"] is False
-    assert "time average not stationary" in st["reason"] and "flow_throughs" in st["reason"]
+    assert "time average not known to the tolerance" in st["reason"] and "max_flow_throughs" in st["reason"]
     tr = st["transient"]
     assert tr["stationary"] is False and tr["evaluated"] and st["criterion_used"] == "time_average_stationary"
-    assert any(tr["half_window_differences"][k] > tr["tolerances"][k] for k in tr["tolerances"])
+    assert any(not tr["relative_errors"][k] <= tr["tolerances"][k] for k in tr["tolerances"])
     assert "washout" not in tr["time_steps"] and tr["washout_s"] == 0
-    assert (tmp_path / "short" / tr["mid_time_folder"] / "UMean").exists()  # reconstructed
+    assert tr["statistics"]["U"]["n_probes"] == 64 and tr["courant"]["end_plane_factor"] >= 1
+    assert (tmp_path / "short" / tr["end_time_folder"] / "UMean").exists()  # reconstructed
     assert "reconstructPar" in st["timings_s"]
-    assert tr["extensions"] == []  # max_doublings 0 (the package default): the window is never extended
 
 
 def _averaging_total_time(time_dir: Path) -> float:
@@ -850,59 +879,31 @@ def _averaging_total_time(time_dir: Path) -> float:
 
 @pytest.mark.openfoam
 @needs_foam
-def test_jet_transient_window_doubled_until_stationary(tmp_path, caplog):
-    """The same too-short window (1/50 flow-through after 3 SIMPLE iterations) with
-    max_doublings 4: the window is doubled, the average continued, until the halves agree or 4
-    doublings (0.32 flow-through times) are done; the accumulated averaging time of the final means is the whole window
-    (fieldAverage continued, not restarted), the middle is the previous window's end. The job
-    log says, as it happens, each window's verdict and each doubling."""
+def test_jet_transient_window_ends_once_its_means_are_known(tmp_path, caplog, monkeypatch):
+    """A window of 0.1 to 3 flow-through times on the slow (steady, Re 150) jet, the watch looking
+    at every poll: the means settle, so pimpleFoam is stopped (stopAt writeNow) long before the
+    longest window; the means written are those of exactly the judged window (fieldAverage's
+    accumulated time = end - start of averaging), and the job log says why it stopped."""
+    import vcs.cfd.transient as transient
+
+    monkeypatch.setattr(transient, "CHECK_EVERY_S", 0.0)
     caplog.set_level("INFO", logger="vcs.cfd.run")
     cfg = deep_merge(
         JET_CFG,
-        {
-            "solver": {
-                "max_iterations": 3,
-                "startup_iterations": 1,
-                "transient": {"flow_throughs": 0.02, "washout_flow_throughs": 0.0, "max_doublings": 4},
-            }
-        },
+        {"solver": {"transient": {"min_flow_throughs": 0.1, "max_flow_throughs": 3.0, "washout_flow_throughs": 0.3}}},
     )
     render_case(tmp_path / "ext", _jet_tube(tmp_path), cfg, flavour="esi")
     st = run_case(tmp_path / "ext", ranks=1)
     tr = st["transient"]
-    assert tr["evaluated"], st["reason"]
-    n = len(tr["extensions"])
-    assert 1 <= n <= 4, tr["extensions"]
-    # (the first window is rounded up to 3 significant digits of seconds: within 1 %)
-    wins = [e["window_flow_throughs"] for e in tr["extensions"]]
-    assert wins == pytest.approx([0.02 * 2**k for k in range(n)], rel=0.01)
-    assert tr["window_flow_throughs"] == pytest.approx(0.02 * 2**n, rel=0.01)
-    assert set(tr["time_steps"]) == {"average", *(f"extend{k + 1}" for k in range(n))}
-    assert tr["end_time"] - tr["averaging_start_time"] == pytest.approx(tr["window_s"])
-    assert float(tr["mid_time_folder"]) == pytest.approx(tr["averaging_start_time"] + tr["window_s"] / 2)
-    # fieldAverage continued: the final means cover the whole window, the middle ones its first half
+    assert tr["evaluated"] and st["converged"] is True, st["reason"]
+    assert tr["ended_early_at"] is not None
+    assert tr["min_end_time"] - 1e-9 <= tr["end_time"] < tr["averaging_start_time"] + 0.5 * tr["max_window_s"]
+    assert tr["window_flow_throughs"] < 1.5
     assert _averaging_total_time(tmp_path / "ext" / tr["end_time_folder"]) == pytest.approx(tr["window_s"], rel=1e-6)
-    mid = tmp_path / "ext" / tr["mid_time_folder"]
-    assert _averaging_total_time(mid) == pytest.approx(tr["window_s"] / 2, rel=1e-6)
-    # the first window was not stationary (as in the test above); the last verdict decides
-    first = tr["extensions"][0]
-    assert any(first[k] > tr["tolerances"][k] for k in tr["tolerances"])
-    if tr["stationary"]:
-        assert st["converged"] is True and st["reason"] is None
-    else:
-        assert n == 4 and st["converged"] is False and "max_doublings" in st["reason"]
-    assert "doubled" in st["criterion"] and "at most 4 times (up to 0.32 flow-through times)" in st["criterion"]
-    # the progress lines: the plan, then per window its verdict, then a doubling when one follows
     lines = [r.getMessage() for r in caplog.records if r.name == "vcs.cfd.run"]
-    assert any(ln.startswith("steady SIMPLE not converged") and "transient fallback" in ln for ln in lines)
-    verdicts = [ln for ln in lines if ln.startswith("window of ")]
-    doublings = [ln for ln in lines if ln.startswith("doubling the window")]
-    assert len(verdicts) == n + 1 and len(doublings) == n, lines
-    assert all(ln.endswith(": not stationary") for ln in verdicts[:-1])
-    assert verdicts[-1].endswith(": stationary" if tr["stationary"] else ": not stationary")
-    for k, ln in enumerate(doublings):
-        assert f"({k + 1} of at most 4)" in ln and f"{wins[k] * 2:.3g} flow-through" in ln
-    assert any(ln.startswith("running pimpleFoam (logs/log.pimpleFoam.extend1)") for ln in lines)
+    assert any(ln.startswith("steady SIMPLE not converged") and "transient solve" in ln for ln in lines)
+    assert any(ln.startswith("averaging window: means known to the tolerance after") for ln in lines), lines
+    assert any(ln.startswith("Courant number on the SIMPLE state") for ln in lines)
 
 
 @pytest.mark.openfoam
@@ -956,7 +957,8 @@ def test_diverged_simple_hands_over_to_the_transient(tmp_path, monkeypatch):
     script.chmod(0o755)
     monkeypatch.setenv("PATH", f"{bindir}:{os.environ['PATH']}")
     stl = _jet_tube(tmp_path)
-    cfg = deep_merge(JET_CFG, {"solver": {"transient": {"flow_throughs": 0.1, "washout_flow_throughs": 0.05}}})
+    tr_cfg = {"min_flow_throughs": 0.1, "max_flow_throughs": 0.1, "washout_flow_throughs": 0.05}
+    cfg = deep_merge(JET_CFG, {"solver": {"transient": tr_cfg}})
     render_case(tmp_path / "c", stl, cfg, flavour="esi")
     st = run_case(tmp_path / "c", ranks=1)
     tr = st["transient"]
@@ -964,7 +966,7 @@ def test_diverged_simple_hands_over_to_the_transient(tmp_path, monkeypatch):
     assert tr["started_from"] == "SIMPLE iteration 5" and tr["start_time"] == 5
     assert tr["evaluated"] and st["criterion_used"] == "time_average_stationary"
     assert st["converged"] is tr["stationary"]
-    assert st["reason"] is None if tr["stationary"] else "not stationary" in st["reason"]
+    assert st["reason"] is None if tr["stationary"] else "not known to the tolerance" in st["reason"]
     assert "failed_log" not in st
     render_case(tmp_path / "n", stl, deep_merge(cfg, {"solver": {"fallback": "none"}}), flavour="esi")
     st = run_case(tmp_path / "n", ranks=1)

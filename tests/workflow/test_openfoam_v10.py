@@ -549,7 +549,7 @@ def test_v10_wrapped_transient_fallback(tiny_tube, v10_solver, tmp_path):
             "max_iterations": 20,
             "startup_iterations": 5,
             "fallback": "transient",
-            "transient": {"flow_throughs": 0.2, "washout_flow_throughs": 0.1},
+            "transient": {"min_flow_throughs": 0.2, "max_flow_throughs": 0.2, "washout_flow_throughs": 0.1},
         },
     }
     case = tmp_path / "v10tr"
@@ -561,7 +561,7 @@ def test_v10_wrapped_transient_fallback(tiny_tube, v10_solver, tmp_path):
     tr = st["transient"]
     assert tr["solver_log"]["time_unit"] == "s" and tr["solver_log"]["ended"]
     assert tr["time_steps"]["washout"] > 5 and tr["time_steps"]["average"] > 5
-    assert tr["courant_max"] is not None and tr["courant_max"] <= 1.05
+    assert tr["courant_max"] is not None and tr["courant_max"] <= 1.02 * tr["courant"]["pimple_max_co"]
     assert tr["evaluated"] and st["criterion_used"] == "time_average_stationary"
     assert st["converged"] is True and st["reason"] is None, st["reason"]
     assert tr["window_flow_throughs"] >= 0.2 and float(tr["end_time_folder"]) == pytest.approx(tr["end_time"])

@@ -210,6 +210,10 @@ class Atlas:
         {included patient id: ``time_average`` (the transient fallback's window means),
         ``instantaneous`` (a converged steady state), from each patient's fields ``field_source``,
         or ``simple_iterate_average`` (a legacy status admitted by ``accept_relaxed``)}.
+    time_average_errors : dict
+        {included patient id whose flow is a time average: its status ``time_average_errors``
+        (the relative half-widths of the confidence intervals of its means, their confidence
+        level and tolerances, the window in flow-through times)}.
     """
 
     patients: list[str]
@@ -226,6 +230,7 @@ class Atlas:
     alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
     exclusion_stages: dict[str, str] = field(default_factory=dict)  # excluded id -> stage
     field_sources: dict[str, str] = field(default_factory=dict)  # included id -> time_average | instantaneous
+    time_average_errors: dict[str, dict[str, Any]] = field(default_factory=dict)  # included id -> error bars
 
 
 def compute_atlas(
@@ -374,6 +379,11 @@ def compute_atlas(
         gpa_mean,
         stages,
         {p: _field_source(fields[p], statuses.get(p)) for p in patients},
+        {
+            p: dict(st["time_average_errors"])
+            for p in patients
+            if (st := statuses.get(p)) and st.get("time_average_errors")
+        },
     )
 
 
@@ -443,7 +453,8 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
     -------
     dict
         JSON-ready: patients included/excluded (with reasons), options, ``field_sources`` (which
-        included patients' flow is a time average, which a steady state), alignment (with each
+        included patients' flow is a time average, which a steady state), ``time_average_errors``
+        (the error bars of the time averages), alignment (with each
         patient's transform), explained variances, sigmas and scores of the shape and flow PCAs,
         and the leave-one-out R^2 of the shape -> flow regression (null where undefined) with its
         ``status`` (``insufficient_patients`` when leave-one-out cannot say anything) and the
@@ -457,6 +468,7 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         ],
         "options": atlas.options,
         "field_sources": atlas.field_sources,
+        "time_average_errors": atlas.time_average_errors,
         "knots": atlas.alignment_report.get("knots"),
         "alignment": {
             **atlas.alignment_report,

@@ -16,7 +16,8 @@ Modules: :mod:`vcs.cfd.openfoam` (defaults, flavour table, detection, templates)
 run, composed), :mod:`vcs.cfd.utilities` (running OpenFOAM utilities: process groups, signals,
 timeouts, failure reasons), :mod:`vcs.cfd.meshing` (meshing, checkMesh, patch check),
 :mod:`vcs.cfd.steady` (SIMPLE, the plateau check), :mod:`vcs.cfd.transient` (the transient
-fallback, its stationarity test), :mod:`vcs.cfd.status` (collecting ``status.json``),
+solve, its time averages and their error bars), :mod:`vcs.cfd.timeseries` (the error bar of a time
+average), :mod:`vcs.cfd.status` (collecting ``status.json``),
 :mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
 """

@@ -104,14 +104,17 @@ DEFAULTS: dict[str, Any] = {
         "fallback": "transient",  # none | transient: if SIMPLE does not converge, run pimpleFoam
         # from the SIMPLE state and report time averages (converged only when stationary)
         "transient": {
-            "flow_throughs": 5.0,  # averaging window [flow-through times V_lumen / Q]
-            # not stationary: the window is doubled (the average continued) at most this many times
-            "max_doublings": 0,
-            "washout_flow_throughs": 1.0,  # start-up wash-out before averaging [flow-through times]
-            "max_co": 1.0,  # Courant number limit of the adjustable time step
-            "stationarity_tolerance": 0.05,  # max relative difference of the two half-window means
-            # of the inlet-outlet pressure difference and of the area-mean time-averaged |WSS|
-            "stationarity_tolerance_U": 0.10,  # ... of U (volume-weighted L2, relative)
+            "washout_flow_throughs": 1.0,  # start-up wash-out before averaging [flow-through times V_lumen / Q]
+            "min_flow_throughs": 1.0,  # shortest averaging window [flow-through times]
+            # longest: a window whose means are not known to the tolerance by then is not stationary
+            "max_flow_throughs": 10.0,
+            "error_tolerance": 0.03,  # half-width of the confidence interval of the mean, relative:
+            # inlet-outlet pressure difference and area-mean TAWSS (vcs.cfd.transient.window_statistics)
+            "error_tolerance_U": 0.05,  # ... of U at the probe cells (L2, relative)
+            "confidence": 0.95,  # confidence level of those intervals
+            "max_co": 1.0,  # Courant number limit on the cells the flow crosses
+            "max_co_end_cells": 4.0,  # at most this on the slivers snapped at the end planes
+            "outer_correctors": 2,  # PIMPLE outer correctors when some cells run above Co 1
         },
         "timeout_s": None,  # wall-clock limit per utility call [s]
     },
@@ -128,6 +131,15 @@ INLET_TYPES = ("jet", "uniform", "parabolic")
 INFLOW_SCALINGS = ("fixed", "scaled_by_inlet_area")
 DIV_SCHEMES = ("upwind", "linearUpwind", "LUST", "limitedLinearV")  # div(phi,U), see fvSchemes
 FALLBACKS = ("none", "transient")
+
+# transient keys of earlier versions and what took their place (a one-line error names it)
+_REPLACED_TRANSIENT_KEYS = {
+    "flow_throughs": "the averaging window now ends when its means are known to error_tolerance, between "
+    "min_flow_throughs and max_flow_throughs",
+    "max_doublings": "the window grows until its means are known to error_tolerance, up to max_flow_throughs",
+    "stationarity_tolerance": "use error_tolerance (half-width of the mean's confidence interval, relative)",
+    "stationarity_tolerance_U": "use error_tolerance_U",
+}
 DECOMPOSITION_METHODS = ("hierarchical", "simple")
 
 # ONE table for both flavours: names that differ, the geometry folder and the case files.
@@ -188,14 +200,16 @@ def deep_merge(base: dict[str, Any], over: dict[str, Any] | None) -> dict[str, A
     return out
 
 
-def _number(cfd: dict[str, Any], dotted: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise VCSInputError unless ``cfd[dotted]`` is a number in [lo, hi] (or (lo, hi])."""
+def _number(
+    cfd: dict[str, Any], dotted: str, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False
+) -> None:
+    """Raise VCSInputError unless ``cfd[dotted]`` is a number in [lo, hi] (open ends when asked)."""
     node: Any = cfd
     for k in dotted.split("."):
         node = node.get(k) if isinstance(node, dict) else None
     ok = isinstance(node, (int, float)) and not isinstance(node, bool) and (node > lo if lo_open else node >= lo)
-    if not ok or node > hi:
-        bound = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+    if not ok or node > hi or (hi_open and node >= hi):
+        bound = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
         raise VCSInputError(f"cfd.{dotted} must be a number in {bound}, not {node!r}")
 
 
@@ -248,16 +262,26 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _word(cfd, "solver.div_scheme", DIV_SCHEMES)
     _word(cfd, "decomposition.method", DECOMPOSITION_METHODS)
     _word(cfd, "io.write_format", ("ascii",))
-    _number(cfd, "solver.transient.flow_throughs", 0.0, 1e3, lo_open=True)
+    tr = cfd["solver"]["transient"]
+    for gone, new in _REPLACED_TRANSIENT_KEYS.items():
+        if gone in tr:
+            raise VCSInputError(f"cfd.solver.transient.{gone} was replaced: {new}")
     _number(cfd, "solver.transient.washout_flow_throughs", 0.0, 1e3)
-    n_dbl = cfd["solver"]["transient"].get("max_doublings", 0)
-    if not (isinstance(n_dbl, int) and not isinstance(n_dbl, bool) and 0 <= n_dbl <= 10):
+    _number(cfd, "solver.transient.min_flow_throughs", 0.0, 1e3, lo_open=True)
+    _number(cfd, "solver.transient.max_flow_throughs", 0.0, 1e4, lo_open=True)
+    if float(tr["max_flow_throughs"]) < float(tr["min_flow_throughs"]):
         raise VCSInputError(
-            f"cfd.solver.transient.max_doublings must be a whole number in [0, 10] (0 = never extend), not {n_dbl!r}"
+            f"cfd.solver.transient.max_flow_throughs ({tr['max_flow_throughs']}) must not be below min_flow_throughs "
+            f"({tr['min_flow_throughs']})"
         )
+    _number(cfd, "solver.transient.error_tolerance", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.transient.error_tolerance_U", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.transient.confidence", 0.5, 1.0, lo_open=True, hi_open=True)
     _number(cfd, "solver.transient.max_co", 0.0, 2.0, lo_open=True)
-    _number(cfd, "solver.transient.stationarity_tolerance", 0.0, 1.0, lo_open=True)
-    _number(cfd, "solver.transient.stationarity_tolerance_U", 0.0, 1.0, lo_open=True)
+    _number(cfd, "solver.transient.max_co_end_cells", 0.0, 10.0, lo_open=True)
+    n_out = tr.get("outer_correctors")
+    if not (isinstance(n_out, int) and not isinstance(n_out, bool) and 1 <= n_out <= 10):
+        raise VCSInputError(f"cfd.solver.transient.outer_correctors must be a whole number in [1, 10], not {n_out!r}")
     pl_it = (cfd["solver"].get("plateau") or {}).get("iterations")
     n_it = float(pl_it) if isinstance(pl_it, (int, float)) and not isinstance(pl_it, bool) else math.nan
     if not (n_it.is_integer() and (n_it == 0 or 10 <= n_it <= 100000)):

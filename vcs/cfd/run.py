@@ -4,8 +4,8 @@
 2. mesh: blockMesh, snappyHexMesh, checkMesh and the patch check (:mod:`vcs.cfd.meshing`);
 3. the inlet profile on the mesh faces, [decomposePar];
 4. steady solve: simpleFoam start-up and main stage, the plateau check (:mod:`vcs.cfd.steady`);
-5. the transient fallback when SIMPLE did not converge: pimpleFoam wash-out and averaging window,
-   the stationarity test of the time average (:mod:`vcs.cfd.transient`);
+5. the transient solve when SIMPLE did not converge: pimpleFoam wash-out and an averaging window
+   that ends when its means are known to the tolerance, with their error bars (:mod:`vcs.cfd.transient`);
 6. [reconstructPar], then convergence, flow rates, the inlet-outlet pressure difference, WSS
    (TAWSS, OSI) and the mesh's prism-layer coverage collected into ``status.json``
    (:mod:`vcs.cfd.status`).
@@ -29,7 +29,7 @@ from vcs.cfd.meshing import mesh_case, patch_check
 from vcs.cfd.openfoam import detect_openfoam
 from vcs.cfd.status import _pyfoam_check, collect, finish
 from vcs.cfd.steady import STAGE_FILES, _criterion_text, plateau_pressure_change, steady_solve, volume_l2_ratio
-from vcs.cfd.transient import stationarity, transient_fallback, transient_plan
+from vcs.cfd.transient import transient_fallback, transient_plan, window_statistics
 from vcs.cfd.utilities import Stop, _Runner, _solver_failure, _utility_failure, stop_group
 
 # run_case, and the names other code imported from vcs.cfd.run before it was split into modules
@@ -43,10 +43,10 @@ __all__ = [
     "patch_check",
     "plateau_pressure_change",
     "run_case",
-    "stationarity",
     "stop_group",
     "transient_plan",
     "volume_l2_ratio",
+    "window_statistics",
 ]
 
 
@@ -62,10 +62,11 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     steady when nothing changes). If SIMPLE does not converge (or diverges: floating point
     exception) and ``solver.fallback`` is ``transient``: pimpleFoam from the last SIMPLE state
     written (after a divergence, the start-up's) (adjustable time step at Courant number <=
-    ``max_co``), a wash-out of ``washout_flow_throughs`` then an averaging window of
-    ``flow_throughs`` flow-through times (lumen volume / flow rate) with fieldAverage of U, p,
-    wallShearStress and |wallShearStress|; ``converged`` is true only when the two halves of the
-    window agree (:func:`vcs.cfd.transient.stationarity`). [reconstructPar]; wallShearStress.
+    ``max_co`` on the cells the flow crosses), a wash-out of ``washout_flow_throughs`` then an
+    averaging window (fieldAverage of U, p, wallShearStress and |wallShearStress|) of
+    ``min_flow_throughs`` to ``max_flow_throughs`` flow-through times (lumen volume / flow rate),
+    ended as soon as its means are known to the tolerance; ``converged`` is true only then
+    (:func:`vcs.cfd.transient.window_statistics`). [reconstructPar]; wallShearStress.
     Failures do not raise: they are reported in the status (``reason``, ``failed_log``); nothing
     raises for a failed, unreadable or not converged run, with or without the fallback. Solver
     logs of both families are read (openfoam.org 10 prints ``Time = 12s``, ESI ``Time = 12``).
@@ -91,7 +92,8 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
         (m^3/s), ``patch_pressure`` (kinematic, m^2/s^2), ``inlet_minus_outlet_pressure``
         (m^2/s^2 and Pa; negative = pressure recovery), ``wall_shear_stress_Pa`` (and, for a
         time average, ``tawss_Pa`` and ``osi``), ``fields`` (which field files hold the
-        result), ``transient`` (the window, its stationarity test; only when the fallback ran),
+        result), ``transient`` (the window, its means' error bars; only when the fallback ran),
+        ``time_average_errors`` (the relative half-widths),
         ``timings_s`` (s), the inlet profile summary, ``solver_log`` (the main SIMPLE stage's
         log: time unit, convergence message and its count, ``End`` reached, execution/clock
         time in s, the banner's family/version/build), ``pyfoam_log_analysis`` (PyFoam's

@@ -1,24 +1,40 @@
-"""The transient fallback, for a flow SIMPLE cannot settle: pimpleFoam from the last SIMPLE state,
-a wash-out then an averaging window of flow-through times (fieldAverage), the stationarity test
-of the time average (the window's two halves agree), the window doubled while it is not
-stationary, and ``transient.png``."""
+"""The transient solve, for a flow SIMPLE cannot settle: pimpleFoam from the last SIMPLE state, a
+wash-out, then an averaging window (fieldAverage) that ends as soon as its means are known to the
+stated tolerance (:mod:`vcs.cfd.timeseries`: batch means with the integral time scale), or at its
+longest; the verdict with an error bar on each time average, and ``transient.png``.
+
+The time step is set by the cells the flow crosses (:func:`courant_plan`): cells cut thin by the
+snapped inlet and outlet planes (slivers a tenth of a cell deep along the flow) would otherwise
+set pimpleFoam's Courant-limited step for the whole lumen.
+"""
 
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vcs.cfd.case import render_files
-from vcs.cfd.foamfiles import function_series, parse_solver_log, read_internal_field, window_mean
-from vcs.cfd.status import _log_summary, _wall_faces, _wall_values
-from vcs.cfd.steady import STAGE_FILES, volume_l2_ratio
+from vcs.cfd.foamfiles import function_series, parse_solver_log, patch_geometry, read_dat, read_internal_field
+from vcs.cfd.status import _log_summary, _wall_faces
+from vcs.cfd.steady import STAGE_FILES, request_write_now
+from vcs.cfd.timeseries import mean_error
 from vcs.cfd.utilities import Stop, _fmt_time, _Runner, _solver_failure, _time_dirs, progress
 
-# a time folder: (solver time, folder name)
-TimeDir = tuple[float, str]
+N_PROBES = 64
+"""Cells whose velocity is recorded at every time step (drawn by volume: the root mean square over
+them estimates the volume L2 norm, the U criterion of the window)."""
+
+END_PLANE_CELLS = 1.5
+"""Cells closer to an inlet or outlet plane than this many of their own sizes are end-plane cells
+(:func:`courant_plan`)."""
+
+CHECK_EVERY_S = 15.0
+"""Wall-clock seconds between two looks of :class:`AverageWatch` at the window's records."""
 
 
 def _round_up(x: float, digits: int = 3) -> float:
@@ -30,7 +46,7 @@ def _round_up(x: float, digits: int = 3) -> float:
 
 
 def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak_velocity: float) -> dict[str, Any]:
-    """The wash-out and averaging window of the transient fallback, from the flow-through time.
+    """The wash-out and the averaging window of the transient solve, from the flow-through time.
 
     Parameters
     ----------
@@ -47,18 +63,19 @@ def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak
     Returns
     -------
     dict
-        ``flow_through_time_s`` = volume / flow rate, ``washout_s``, ``window_s`` (rounded up to 3
-        significant digits), ``washout_flow_throughs``, ``window_flow_throughs`` (the rounded
-        values in flow-through times), ``start_time``, ``averaging_start_time``, ``mid_time``,
-        ``end_time`` (solver times, s), ``delta_t_initial_s`` (max_co x smallest cell /
-        peak velocity; pimpleFoam lowers it further when the Courant number asks),
-        ``max_delta_t_s`` (a twentieth of the half window).
+        ``flow_through_time_s`` = volume / flow rate; ``washout_s``, ``min_window_s``,
+        ``max_window_s`` (rounded up to 3 significant digits) and the same in flow-through times;
+        solver times ``start_time``, ``averaging_start_time``, ``min_end_time``, ``max_end_time``;
+        ``delta_t_initial_s`` (max_co x smallest cell / peak velocity; pimpleFoam lowers it
+        when the Courant number asks), ``max_delta_t_s`` (a fiftieth of a flow-through time and
+        a twentieth of the shortest window).
     """
     cfd = state["cfd"]
     tr = cfd["solver"]["transient"]
     t_ft = volume / float(state["flow_rate"])
     washout = _round_up(float(tr["washout_flow_throughs"]) * t_ft)
-    window = _round_up(float(tr["flow_throughs"]) * t_ft)
+    w_min = _round_up(float(tr["min_flow_throughs"]) * t_ft)
+    w_max = max(_round_up(float(tr["max_flow_throughs"]) * t_ft), w_min)
     if state.get("mesh_sizing"):
         h_min = float(state["mesh_sizing"]["smallest_cell_m"])
     else:  # a state without sizing: a numeric cell size and the configured levels
@@ -72,25 +89,28 @@ def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak
         "flow_through_time_s": t_ft,
         "washout_s": washout,
         "washout_flow_throughs": washout / t_ft,
-        "window_s": window,
-        "window_flow_throughs": window / t_ft,
+        "min_window_s": w_min,
+        "min_window_flow_throughs": w_min / t_ft,
+        "max_window_s": w_max,
+        "max_window_flow_throughs": w_max / t_ft,
         "start_time": start_time,
         "averaging_start_time": t_w,
-        "mid_time": t_w + 0.5 * window,
-        "end_time": t_w + window,
+        "min_end_time": t_w + w_min,
+        "max_end_time": t_w + w_max,
         "delta_t_initial_s": float(tr["max_co"]) * h_min / max(peak_velocity, 1e-12),
-        "max_delta_t_s": 0.05 * window,
+        "max_delta_t_s": min(0.02 * t_ft, 0.05 * w_min),
     }
 
 
 def transient_fallback(
     case_dir: Path, state: dict[str, Any], status: dict[str, Any], run: _Runner, ranks: int, prof: dict[str, Any]
 ) -> dict[str, Any]:
-    """Run the transient fallback and judge its stationarity; fills ``status``; never raises.
+    """Run the transient solve and judge its time average; fills ``status``; never raises.
 
-    Wash-out, averaging window, stationarity test of its halves; a window that is not stationary
-    is doubled (pimpleFoam continued, fieldAverage continuing its sums) and re-tested, at most
-    ``transient.max_doublings`` times (``status["transient"]["extensions"]``).
+    Wash-out, then the averaging window: it ends once ``min_flow_throughs`` have passed and the
+    means of the inlet-outlet pressure difference, of the area-mean |WSS| and of U are known to
+    ``error_tolerance`` / ``error_tolerance_U`` (:func:`window_statistics`), else at
+    ``max_flow_throughs``, not stationary.
 
     Parameters
     ----------
@@ -110,7 +130,7 @@ def transient_fallback(
     Returns
     -------
     dict
-        The ``status["transient"]`` dict (``evaluated`` true when the half-window test ran).
+        The ``status["transient"]`` dict (``evaluated`` true when the window was judged).
     """
     simple_reason = status["reason"]
     tr: dict[str, Any] = {"solver": "pimpleFoam", "evaluated": False, "steady_not_converged": simple_reason}
@@ -119,13 +139,17 @@ def transient_fallback(
     try:
         plan, root = _start_from_simple(case_dir, state, status, tr, ranks, prof)
         common = _pimple_settings(plan)
-        _run_washout_and_window(case_dir, state, run, ranks, plan, common, tr)
-        mid, end = _window_folders(case_dir, run, ranks, plan, tr, root)
-        verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
-        _log_verdict(plan, verdict)
-        plan, verdict = _double_until_stationary(
-            case_dir, state, run, ranks, prof, plan, common, tr, root, end, verdict
+        # the controlDict the Courant numbers are computed with (deltaT: the initial time step)
+        render_files(
+            case_dir, state, STAGE_FILES, end_time=_fmt_time(plan["max_end_time"]), write_interval="1", **common
         )
+        cour = courant_plan(case_dir, state, run, ranks, root, plan)
+        tr["courant"] = {k: v for k, v in cour.items() if k != "probe_points"}
+        common.update(max_co=cour["pimple_max_co"], outer_correctors=cour["outer_correctors"])
+        peak = float(prof["peak_velocity"])
+        end = _run_washout_and_window(case_dir, state, run, ranks, plan, common, cour["probe_points"], tr, root, peak)
+        verdict = window_statistics(case_dir, state, plan["averaging_start_time"], end[0], peak)
+        _log_verdict(verdict)
         _record_verdict(case_dir, state, status, tr, plan, verdict, simple_reason)
         return tr
     except Stop as stop:
@@ -166,16 +190,17 @@ def _start_from_simple(
     tr.update(plan)
     tr["started_from"] = f"SIMPLE iteration {times[-1][1]}"
     progress.info(
-        "steady SIMPLE not converged (%s): transient fallback from iteration %s, flow-through time "
-        "%.3g s, wash-out %.3g s, window %.3g s (%.3g flow-through times), solver time %s to %s",
+        "steady SIMPLE not converged (%s): transient solve from iteration %s, flow-through time %.3g s, "
+        "wash-out %.3g s, averaging window %.3g-%.3g s (%.3g-%.3g flow-through times; it ends when its means "
+        "are known to the tolerance)",
         tr["steady_not_converged"],
         times[-1][1],
         plan["flow_through_time_s"],
         plan["washout_s"],
-        plan["window_s"],
-        plan["window_flow_throughs"],
-        _fmt_time(plan["start_time"]),
-        _fmt_time(plan["end_time"]),
+        plan["min_window_s"],
+        plan["max_window_s"],
+        plan["min_window_flow_throughs"],
+        plan["max_window_flow_throughs"],
     )
     # the restart would take the time step of the SIMPLE stage (1) from <time>/uniform/time:
     # without that file the controlDict's deltaT applies, lowered to max_co by pimpleFoam
@@ -194,6 +219,111 @@ def _pimple_settings(plan: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _cell_fields(case_dir: Path, ranks: int, time_name: str, names: tuple[str, ...]) -> list[NDArray[np.floating]]:
+    """Internal fields of a time folder, the processors' concatenated when ``ranks`` > 1 (the
+    order does not matter to the callers: per-cell values side by side)."""
+    roots = [case_dir] if ranks <= 1 else sorted(case_dir.glob("processor*"), key=lambda p: int(p.name[9:]))
+    out: list[list[NDArray[np.floating]]] = [[] for _ in names]
+    for r in roots:
+        n = None
+        for i, name in enumerate(names):
+            v = read_internal_field(r / time_name / name, n)
+            n = len(v)
+            out[i].append(v)
+    return [np.concatenate(v) for v in out]
+
+
+def end_plane_cells(
+    centres: NDArray[np.floating],
+    volumes: NDArray[np.floating],
+    planes: list[tuple[NDArray[np.floating], NDArray[np.floating]]],
+) -> NDArray[np.bool_]:
+    """Cells within :data:`END_PLANE_CELLS` of their own size (cube root of the volume) from any
+    of the end planes (point, unit normal): the cells snapping cuts into slivers."""
+    h = np.cbrt(volumes)
+    near = np.zeros(len(centres), dtype=bool)
+    for c, n in planes:
+        near |= np.abs((centres - c) @ n) < END_PLANE_CELLS * h
+    return near
+
+
+def courant_plan(
+    case_dir: Path, state: dict[str, Any], run: _Runner, ranks: int, root: Path, plan: dict[str, Any]
+) -> dict[str, Any]:
+    """The Courant number limit of pimpleFoam, set by the cells the flow crosses, and the probe cells.
+
+    The Courant number of each cell, Co = 0.5 sum_f |phi_f| dt / V (OpenFOAM's ``CourantNo``),
+    is computed on the SIMPLE state. Where the snapped inlet or outlet plane cuts a background
+    cell, snappyHexMesh leaves a sliver a fraction of a cell deep along the flow, whose Courant
+    number is several times that of any cell the flow crosses (AortaCFD patient1: 4 outlet-plane
+    cells at 2.2x the largest elsewhere held its time step at 8.6e-5 s). pimpleFoam limits the
+    largest Co over all cells, so the limit it is given is ``max_co`` x (largest Co / largest Co
+    away from the end planes, :func:`end_plane_cells`), at most ``max_co_end_cells``: the cells
+    the flow crosses run at ``max_co``, the end-plane slivers above it, and then with
+    ``outer_correctors`` PIMPLE outer correctors (a few cells above Co 1 in the flow extensions,
+    outside the measured section).
+
+    Returns
+    -------
+    dict
+        ``courant_per_s_max`` (largest Co / dt over all cells, 1/s), ``courant_per_s_interior``
+        (away from the end planes), ``end_plane_factor`` (their ratio, >= 1),
+        ``end_plane_cells`` (how many end-plane cells exceed the interior's largest Co),
+        ``pimple_max_co``, ``outer_correctors``, ``delta_t_expected_s`` (pimpleFoam's time step on
+        the SIMPLE state), ``probe_points`` ((N, 3) m: :data:`N_PROBES` cells away from the end
+        planes, drawn with probability proportional to their volume, seed 0).
+    """
+    tr = state["cfd"]["solver"]["transient"]
+    t_name = _time_dirs(root)[-1][1]
+    funcs = "(CourantNo writeCellCentres writeCellVolumes)"
+    if run(["postProcess", "-funcs", funcs, "-time", t_name], "postProcess.courant", ranks).returncode != 0:
+        raise Stop(
+            "postProcess (CourantNo, cell centres and volumes on the SIMPLE state) failed", "postProcess.courant"
+        )
+    co, centres, vols = _cell_fields(case_dir, ranks, t_name, ("Co", "C", "V"))
+    per_s = co / float(plan["delta_t_initial_s"])  # the controlDict's deltaT (uniform/time was removed)
+    planes = []
+    for p in state["patches"]:
+        if p["role"] in ("inlet", "outlet"):
+            c, sf = patch_geometry(case_dir, p["name"])
+            a = np.linalg.norm(sf, axis=1)
+            n = sf.sum(axis=0)
+            planes.append(((c * a[:, None]).sum(axis=0) / a.sum(), n / np.linalg.norm(n)))
+    near = end_plane_cells(centres, vols, planes)
+    c_max = float(per_s.max())
+    c_in = float(per_s[~near].max()) if (~near).any() else c_max
+    factor = max(c_max / c_in, 1.0) if c_in > 0 else 1.0
+    max_co = float(tr["max_co"])
+    pimple_co = min(max_co * factor, max(float(tr["max_co_end_cells"]), max_co))
+    outer = 1 if pimple_co <= 1.0 + 1e-9 else int(tr["outer_correctors"])
+    rng = np.random.default_rng(0)
+    pool = np.flatnonzero(~near)
+    k = min(N_PROBES, len(pool))
+    pick = rng.choice(pool, size=k, replace=False, p=vols[pool] / vols[pool].sum()) if k else pool
+    out = {
+        "courant_per_s_max": c_max,
+        "courant_per_s_interior": c_in,
+        "end_plane_factor": factor,
+        "end_plane_cells": int((per_s[near] > c_in).sum()),
+        "pimple_max_co": pimple_co,
+        "outer_correctors": outer,
+        "delta_t_expected_s": pimple_co / c_max if c_max > 0 else None,
+        "probe_points": centres[np.sort(pick)].tolist(),
+    }
+    progress.info(
+        "Courant number on the SIMPLE state: largest %.3g/s (%d end-plane cells above the %.3g/s of the cells the "
+        "flow crosses, x%.2f): pimpleFoam maxCo %.3g, %d outer corrector(s), time step ~%.3g s",
+        c_max,
+        out["end_plane_cells"],
+        c_in,
+        factor,
+        pimple_co,
+        outer,
+        out["delta_t_expected_s"] or float("nan"),
+    )
+    return out
+
+
 def _run_washout_and_window(
     case_dir: Path,
     state: dict[str, Any],
@@ -201,157 +331,268 @@ def _run_washout_and_window(
     ranks: int,
     plan: dict[str, Any],
     common: dict[str, Any],
+    probe_points: list[list[float]],
     tr: dict[str, Any],
-) -> None:
-    """pimpleFoam: the wash-out (when there is one), then the averaging window (fieldAverage,
-    written at its middle and end); time steps, Courant number, time steps and the last log in
-    ``tr``. Raises :class:`Stop` when a stage fails."""
+    root: Path,
+    peak_velocity: float,
+) -> tuple[float, str]:
+    """pimpleFoam: the wash-out (when there is one), then the averaging window (fieldAverage, the
+    records judged while it runs by :class:`AverageWatch`, written at its end); time steps,
+    Courant number and the last log in ``tr``. Returns the end's time folder (solver time,
+    name); raises :class:`Stop` when a stage fails."""
     steps: dict[str, int] = {}
     tr["time_steps"] = steps
     stages = []
     if plan["washout_s"] > 0:
-        stages.append(("washout", plan["averaging_start_time"], plan["washout_s"], False))
-    stages.append(("average", plan["end_time"], 0.5 * plan["window_s"], True))
+        stages.append(("washout", plan["averaging_start_time"], False))
+    stages.append(("average", plan["max_end_time"], True))
     parsed: dict[str, Any] = {}
-    for name, end, interval, average in stages:
+    lo, hi, co = [], [], []
+    watch = None
+    for name, end, average in stages:
         render_files(
             case_dir,
             state,
             STAGE_FILES,
             end_time=_fmt_time(end),
-            write_interval=_fmt_time(interval),
+            write_interval=_fmt_time(end - _time_dirs(root)[-1][0]),
             average=average,
+            probe_points=probe_points if average else None,
             **common,
         )
         log = f"pimpleFoam.{name}"
-        r = run(["pimpleFoam"], log, ranks)
+        watch = AverageWatch(case_dir, state, plan, peak_velocity) if average else None
+        r = run(["pimpleFoam"], log, ranks, watch=watch)
         parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
         steps[name] = len(parsed["rows"])
+        lo.append(parsed["delta_t_min"])
+        hi.append(parsed["delta_t_max"])
+        co.append(parsed["courant_max"])
         if r.returncode != 0:
             raise Stop(_solver_failure(case_dir / "logs" / f"log.{log}", name, "pimpleFoam"), log)
-    tr["courant_max"] = parsed["courant_max"]
-    tr["delta_t_s"] = {"min": parsed["delta_t_min"], "max": parsed["delta_t_max"]}
+    tr["courant_max"] = max((c for c in co if c is not None), default=None)
+    tr["delta_t_s"] = {"min": min((x for x in lo if x), default=None), "max": max((x for x in hi if x), default=None)}
     tr["solver_log"] = _log_summary(parsed, case_dir / "logs" / "log.pimpleFoam.average")
     if parsed["rows"]:
         tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
-
-
-def _window_folders(
-    case_dir: Path, run: _Runner, ranks: int, plan: dict[str, Any], tr: dict[str, Any], root: Path
-) -> tuple[TimeDir, TimeDir]:
-    """The time folders at the middle and at the end of the averaging window (as planned,
-    reconstructed when ``ranks`` > 1); their names in ``tr``. Raises :class:`Stop` when they are
-    missing or off the plan."""
+    if watch is not None and watch.stopped_at is not None:
+        tr["ended_early_at"] = watch.stopped_at
     written = [t for t in _time_dirs(root) if t[0] > plan["averaging_start_time"] + 1e-9]
     if not written:
         raise Stop("the averaging stage wrote no time folder", "pimpleFoam.average")
-    mid = min(written, key=lambda t: abs(t[0] - plan["mid_time"]))
-    end = written[-1]
-    slack = 1e-3 * plan["window_s"]  # write times are hit exactly (adjustableRunTime), names rounded
-    if abs(end[0] - plan["end_time"]) > slack or abs(mid[0] - plan["mid_time"]) > slack:
+    end_dir = written[-1]
+    if end_dir[0] < plan["min_end_time"] - 1e-3 * plan["min_window_s"]:
         raise Stop(
-            f"the averaging stage ended at {end[1]} (planned {_fmt_time(plan['end_time'])}), middle write at "
-            f"{mid[1]} (planned {_fmt_time(plan['mid_time'])})",
+            f"the averaging stage ended at {end_dir[1]}, before the shortest window's end "
+            f"{_fmt_time(plan['min_end_time'])}",
             "pimpleFoam.average",
         )
-    if ranks > 1:
-        if run(["reconstructPar", "-time", f"{mid[1]},{end[1]}"], "reconstructPar").returncode != 0:
-            raise Stop("reconstructPar failed", "reconstructPar")
-    tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
-    return mid, end
-
-
-def _double_until_stationary(
-    case_dir: Path,
-    state: dict[str, Any],
-    run: _Runner,
-    ranks: int,
-    prof: dict[str, Any],
-    plan: dict[str, Any],
-    common: dict[str, Any],
-    tr: dict[str, Any],
-    root: Path,
-    end: TimeDir,
-    verdict: dict[str, Any],
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Not stationary: double the window, continuing the average, at most ``max_doublings`` times
-    (each in ``tr["extensions"]``, each judged by :func:`stationarity`). Returns the last plan and
-    verdict; raises :class:`Stop` when an extension fails."""
-    doublings = int(state["cfd"]["solver"]["transient"].get("max_doublings") or 0)
-    slack = 1e-3 * plan["window_s"]  # of the first window, as for its folders
-    extensions: list[dict[str, Any]] = []
-    tr["extensions"] = extensions
-    while not verdict["stationary"] and len(extensions) < doublings:
-        extensions.append({"window_flow_throughs": plan["window_flow_throughs"], **verdict["half_window_differences"]})
-        plan, last = _extend_window(case_dir, state, run, ranks, plan, common, tr, root, slack, doublings)
-        mid, end = end, last
-        tr["mid_time_folder"], tr["end_time_folder"] = mid[1], end[1]
-        verdict = stationarity(case_dir, state, plan, mid[1], end[1], float(prof["peak_velocity"]))
-        _log_verdict(plan, verdict)
-    return plan, verdict
-
-
-def _extend_window(
-    case_dir: Path,
-    state: dict[str, Any],
-    run: _Runner,
-    ranks: int,
-    plan: dict[str, Any],
-    common: dict[str, Any],
-    tr: dict[str, Any],
-    root: Path,
-    slack: float,
-    doublings: int,
-) -> tuple[dict[str, Any], TimeDir]:
-    """One doubling of the window (the ``len(tr["extensions"])``-th): pimpleFoam continued for
-    the window's length, fieldAverage continuing its sums; the doubled plan and the solver's
-    numbers in ``tr``. Returns (the doubled plan, the new end's time folder)."""
-    n = len(tr["extensions"])
-    w = plan["window_s"]
-    plan = {
-        **plan,
-        "window_s": 2 * w,
-        "window_flow_throughs": 2 * plan["window_flow_throughs"],
-        "mid_time": plan["end_time"],
-        "end_time": plan["end_time"] + w,
-    }
-    tr.update(plan)
-    progress.info(
-        "doubling the window to %.3g flow-through times (%d of at most %d): pimpleFoam continues to %s",
-        plan["window_flow_throughs"],
-        n,
-        doublings,
-        _fmt_time(plan["end_time"]),
-    )
-    render_files(
-        case_dir,
-        state,
-        STAGE_FILES,
-        end_time=_fmt_time(plan["end_time"]),
-        write_interval=_fmt_time(w),
-        average=True,
-        average_continue=True,
-        **common,
-    )
-    log = f"pimpleFoam.extend{n}"
-    r = run(["pimpleFoam"], log, ranks)
-    parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
-    tr["time_steps"][f"extend{n}"] = len(parsed["rows"])
-    if r.returncode != 0:
-        raise Stop(_solver_failure(case_dir / "logs" / f"log.{log}", log, "pimpleFoam"), log)
-    last = _time_dirs(root)[-1]
-    if abs(last[0] - plan["end_time"]) > slack:
-        raise Stop(f"the window extension ended at {last[1]} (planned {_fmt_time(plan['end_time'])})", log)
-    if ranks > 1 and run(["reconstructPar", "-time", last[1]], "reconstructPar").returncode != 0:
+    if ranks > 1 and run(["reconstructPar", "-time", end_dir[1]], "reconstructPar").returncode != 0:
         raise Stop("reconstructPar failed", "reconstructPar")
-    tr["courant_max"] = max(tr["courant_max"] or 0.0, parsed["courant_max"] or 0.0)
-    lo = [x for x in (tr["delta_t_s"]["min"], parsed["delta_t_min"]) if x is not None]
-    hi = [x for x in (tr["delta_t_s"]["max"], parsed["delta_t_max"]) if x is not None]
-    tr["delta_t_s"] = {"min": min(lo) if lo else None, "max": max(hi) if hi else None}
-    tr["solver_log"] = _log_summary(parsed, case_dir / "logs" / f"log.{log}")
-    if parsed["rows"]:
-        tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
-    return plan, last
+    tr["end_time"] = end_dir[0]
+    tr["end_time_folder"] = end_dir[1]
+    return end_dir
+
+
+class AverageWatch:
+    """Ends the averaging window as soon as its means are known to the tolerance: every
+    :data:`CHECK_EVERY_S` s of wall clock it reads the window's records (patch pressures, area-mean
+    |WSS|, probe velocities); once ``min_flow_throughs`` have passed and
+    :func:`window_statistics` finds every half-width within its tolerance, it asks pimpleFoam to
+    write and stop (``stopAt writeNow``): fieldAverage writes the means at that time."""
+
+    def __init__(self, case_dir: Path, state: dict[str, Any], plan: dict[str, Any], peak_velocity: float) -> None:
+        self.case_dir, self.state, self.plan = case_dir, state, plan
+        self.peak = float(peak_velocity)
+        self.next_look = time.monotonic() + CHECK_EVERY_S
+        self.stopped_at: float | None = None
+
+    def __call__(self, log: Path) -> None:
+        """Look at the records (at most every :data:`CHECK_EVERY_S` s); stop the solver once (see class)."""
+        if self.stopped_at is not None or time.monotonic() < self.next_look:
+            return
+        self.next_look = time.monotonic() + CHECK_EVERY_S
+        t0 = self.plan["averaging_start_time"]
+        try:
+            now = float(function_series(self.case_dir, _dp_names(self.state)[0][0])[-1, 0])
+        except (IndexError, ValueError, OSError):
+            return
+        if now < self.plan["min_end_time"]:
+            return
+        try:
+            stats = window_statistics(self.case_dir, self.state, t0, now, self.peak)
+        except (ValueError, OSError, IndexError):  # a record caught mid-write: look again later
+            return
+        if stats["stationary"]:
+            request_write_now(self.case_dir / "system" / "controlDict")
+            self.stopped_at = now
+            progress.info(
+                "averaging window: means known to the tolerance after %.3g flow-through times: %s; stopping pimpleFoam",
+                (now - t0) / self.plan["flow_through_time_s"],
+                _errors_text(stats),
+            )
+
+
+def _dp_names(state: dict[str, Any]) -> tuple[list[str], list[str]]:
+    """The function-object names of the inlet and of the outlet patch pressures."""
+    inlets = [f"pressure_{p['name']}" for p in state["patches"] if p["role"] == "inlet"]
+    outlets = [f"pressure_{p['name']}" for p in state["patches"] if p["role"] == "outlet"]
+    return inlets, outlets
+
+
+def _records(case_dir: Path, state: dict[str, Any], start: float, end: float) -> dict[str, Any]:
+    """The window's records (start, end]: times, inlet-outlet pressure difference, area-mean |WSS|
+    (kinematic), probe velocities (n, 3 N)."""
+    inlets, outlets = _dp_names(state)
+    p_in = function_series(case_dir, inlets[0])
+    t = p_in[:, 0]
+    sel = (t > start + 1e-12) & (t <= end + 1e-12)
+    t = t[sel]
+    if len(t) < 2:
+        raise ValueError(f"fewer than 2 time steps recorded between solver times {start:g} and {end:g}")
+    p_out = np.mean([np.interp(t, s[:, 0], s[:, 1]) for s in (function_series(case_dir, n) for n in outlets)], axis=0)
+    dp = p_in[sel, 1] - p_out
+    walls = _wall_faces(case_dir, state)
+    areas = np.array([a.sum() for _, a in walls])
+    wss = [function_series(case_dir, f"wss_{name}") for name, _ in walls]
+    if any(len(w) == 0 for w in wss):
+        raise ValueError("no area-mean |WSS| recorded on the wall")
+    tawss = sum(ar * np.interp(t, w[:, 0], w[:, 1]) for ar, w in zip(areas, wss, strict=True)) / areas.sum()
+    probes = _probe_series(case_dir)
+    u = None
+    if probes is not None and len(probes):
+        pt, pv = probes[:, 0], probes[:, 1:]
+        u = np.column_stack([np.interp(t, pt, pv[:, j]) for j in range(pv.shape[1])])
+    return {"t": t, "dp": dp, "tawss": tawss, "U": u}
+
+
+def _probe_series(case_dir: Path) -> NDArray[np.floating] | None:
+    """The probes' U record (time, then 3 components per probe), over all start folders; None when
+    there is none. Probes outside the mesh (OpenFOAM writes a huge value) are dropped."""
+    files = sorted((case_dir / "postProcessing" / "probes").glob("*/U"), key=lambda p: float(p.parent.name))
+    if not files:
+        return None
+    arr = read_dat(files[-1])
+    if arr.shape[0] == 0 or (arr.shape[1] - 1) % 3:
+        return None
+    vals = arr[:, 1:].reshape(len(arr), -1, 3)
+    ok = np.all(np.abs(vals) < 1e10, axis=(0, 2))
+    return np.column_stack([arr[:, :1], vals[:, ok, :].reshape(len(arr), -1)])
+
+
+def window_statistics(
+    case_dir: Path, state: dict[str, Any], start: float, end: float, peak_velocity: float
+) -> dict[str, Any]:
+    """The time averages of the window (start, end] and their error bars: known to the tolerance?
+
+    For each record (inlet-outlet pressure difference, area-mean |WSS| on the wall, and the
+    velocity at the probe cells), the mean and the half-width of its confidence interval
+    (:func:`vcs.cfd.timeseries.mean_error`: batch means of at least 5 integral time scales, and
+    the integral-time-scale estimate 2 T_int sigma^2 / T, the larger). Relative half-widths:
+
+    * dp: half-width / max(|mean dp|, 10 % of the inlet dynamic pressure U_peak^2 / 2) (dp may
+      cross zero);
+    * TAWSS (area mean): half-width / mean;
+    * U: sqrt(sum_i |half-width_i|^2 / sum_i |mean U_i|^2) over the probe cells (drawn by
+      volume: an estimate of the volume L2 norm of the error field relative to that of the mean).
+
+    The means are known when each is within ``error_tolerance`` (dp, TAWSS) or
+    ``error_tolerance_U`` (U).
+
+    Returns
+    -------
+    dict
+        ``window_s``, ``confidence``, ``statistics`` {``inlet_minus_outlet_pressure``,
+        ``tawss_mean``: {``mean_Pa``, ``half_width_Pa``, ``relative``, ``integral_time_s``,
+        ``n_batches``}, ``U``: {``relative``, ``n_probes``, ``integral_time_s`` (median),
+        ``n_batches`` (least)}}, ``relative_errors``, ``tolerances``, ``stationary`` (bool: all
+        known), ``why`` (one line, when not).
+    """
+    tr = state["cfd"]["solver"]["transient"]
+    rho = float(state["cfd"]["physics"]["rho"])
+    conf = float(tr["confidence"])
+    rec = _records(case_dir, state, start, end)
+    t = rec["t"]
+    e_dp = mean_error(t, rec["dp"], start, conf)
+    e_w = mean_error(t, rec["tawss"], start, conf)
+    dp_scale = max(abs(e_dp["mean"]), 0.1 * 0.5 * peak_velocity**2)
+    rel = {
+        "inlet_minus_outlet_pressure": e_dp["half_width"] / dp_scale,
+        "tawss_mean": e_w["half_width"] / max(abs(e_w["mean"]), 1e-300),
+    }
+    st: dict[str, Any] = {
+        "inlet_minus_outlet_pressure": _scalar_stats(e_dp, rho, rel["inlet_minus_outlet_pressure"]),
+        "tawss_mean": _scalar_stats(e_w, rho, rel["tawss_mean"]),
+    }
+    if rec["U"] is not None:
+        e_u = mean_error(t, rec["U"], start, conf)
+        hw, mean = np.asarray(e_u["half_width"]), np.asarray(e_u["mean"])
+        rel["U"] = float(np.sqrt((hw**2).sum() / max((mean**2).sum(), 1e-300)))
+        st["U"] = {
+            "relative": rel["U"],
+            "n_probes": len(mean) // 3,
+            "integral_time_s": float(np.median(e_u["integral_time_s"])),
+            "n_batches": int(np.min(e_u["n_batches"])),
+            "bound_range_probes": int(np.sum(np.asarray(e_u["bound"]) == "range")) // 3,
+        }
+    tols = {
+        "inlet_minus_outlet_pressure": float(tr["error_tolerance"]),
+        "tawss_mean": float(tr["error_tolerance"]),
+        "U": float(tr["error_tolerance_U"]),
+    }
+    tols = {k: v for k, v in tols.items() if k in rel}
+    bad = [k for k in rel if not rel[k] <= tols[k]]  # NaN and inf: not known
+    out: dict[str, Any] = {
+        "window_s": float(end - start),
+        "confidence": conf,
+        "statistics": st,
+        "relative_errors": rel,
+        "tolerances": tols,
+        "stationary": not bad,
+    }
+    if bad:
+        out["why"] = "; ".join(f"{_WORDS[k]} known to +-{_pct(rel[k])} (tolerance {100 * tols[k]:g} %)" for k in bad)
+    return out
+
+
+def _scalar_stats(e: dict[str, Any], rho: float, relative: float) -> dict[str, Any]:
+    """status.json's statistics of one scalar record (kinematic -> Pa)."""
+    return {
+        "mean_Pa": float(e["mean"]) * rho,
+        "half_width_Pa": float(e["half_width"]) * rho,
+        "relative": float(relative),
+        "integral_time_s": float(e["integral_time_s"]),
+        "n_batches": int(e["n_batches"]),
+        "bound": str(e["bound"]),
+    }
+
+
+_WORDS = {
+    "inlet_minus_outlet_pressure": "inlet-outlet pressure difference",
+    "tawss_mean": "mean TAWSS",
+    "U": "U (L2 over the probe cells)",
+}
+
+
+def _pct(x: float) -> str:
+    """A relative error in per cent (``unknown`` when infinite: too few batches yet)."""
+    return f"{100 * x:.2g} %" if np.isfinite(x) else "unknown (too few integral time scales)"
+
+
+def _errors_text(stats: dict[str, Any]) -> str:
+    """The relative half-widths of :func:`window_statistics`, in words."""
+    rel, tol = stats["relative_errors"], stats["tolerances"]
+    return ", ".join(f"{_WORDS[k]} +-{_pct(rel[k])} (tolerance {100 * tol[k]:g} %)" for k in rel)
+
+
+def _log_verdict(verdict: dict[str, Any]) -> None:
+    """One log line: the verdict of the window (:func:`window_statistics`)."""
+    progress.info(
+        "averaging window of %.4g s: %s: %s",
+        verdict["window_s"],
+        _errors_text(verdict),
+        "stationary" if verdict["stationary"] else "not known to the tolerance",
+    )
 
 
 def _record_verdict(
@@ -363,11 +604,18 @@ def _record_verdict(
     verdict: dict[str, Any],
     simple_reason: str | None,
 ) -> None:
-    """The last window's verdict in ``tr`` and ``status`` (the time-averaged fields are the
-    result; converged when stationary), and ``transient.png``."""
+    """The window's verdict in ``tr`` and ``status`` (the time-averaged fields are the result;
+    converged when every mean is known to its tolerance), and ``transient.png``."""
     tr.update(verdict)
+    tr["window_flow_throughs"] = verdict["window_s"] / plan["flow_through_time_s"]
     tr["evaluated"] = True
     status["criterion_used"] = "time_average_stationary"
+    status["time_average_errors"] = {
+        "confidence": verdict["confidence"],
+        "relative": verdict["relative_errors"],
+        "tolerances": verdict["tolerances"],
+        "window_flow_throughs": tr["window_flow_throughs"],
+    }
     status["fields"] = {
         "U": "UMean",
         "p": "pMean",
@@ -375,160 +623,22 @@ def _record_verdict(
         "TAWSS": "magWallShearStressMean",
         "time_averaged": True,
     }
-    _plot_transient(case_dir, state, plan, verdict["halves"])
+    _plot_transient(case_dir, state, plan, verdict)
     if verdict["stationary"]:
         status["converged"] = True
         status["reason"] = None
     else:
-        status["reason"] = f"{simple_reason}; {verdict['why']}"
+        status["reason"] = (
+            f"{simple_reason}; time average not known to the tolerance after the longest window "
+            f"({tr['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
+            f"{plan['washout_s']:.3g} s wash-out): {verdict['why']}; raise cfd.solver.transient.max_flow_throughs "
+            "(or error_tolerance)"
+        )
 
 
-_HALF_WORDS = {  # the half-window differences of :func:`stationarity`, in words
-    "inlet_minus_outlet_pressure": "inlet-outlet pressure difference",
-    "tawss_mean": "mean TAWSS",
-    "U_L2": "U (L2)",
-}
-
-
-def _log_verdict(plan: dict[str, Any], verdict: dict[str, Any]) -> None:
-    """One log line: the stationarity test of a window (:func:`stationarity`)."""
-    d, tol = verdict["half_window_differences"], verdict["tolerances"]
-    progress.info(
-        "window of %.3g flow-through times: half-window differences %s: %s",
-        plan["window_flow_throughs"],
-        ", ".join(f"{_HALF_WORDS[k]} {100 * d[k]:.2g} % (tolerance {100 * tol[k]:g} %)" for k in d),
-        "stationary" if verdict["stationary"] else "not stationary",
-    )
-
-
-def stationarity(
-    case_dir: Path, state: dict[str, Any], plan: dict[str, Any], mid: str, end: str, peak_velocity: float
-) -> dict[str, Any]:
-    """Compare the two halves of the averaging window (the stationarity test of the time average).
-
-    fieldAverage wrote the running means at the middle (= mean of the first half, M1) and at the
-    end (= mean of the whole window, M) of the window; the halves are equally long, so the mean
-    of the second half is M2 = 2 M - M1, exactly. Compared (relative differences):
-
-    * inlet-outlet pressure difference (time-weighted means of the patch-averaged p over each
-      half), relative to |dp| of the whole window but at least 10 % of the inlet dynamic pressure
-      U_peak^2 / 2 (dp may cross zero);
-    * area-weighted mean TAWSS (time average of |WSS|) on the wall, relative to the window's;
-    * U: volume-weighted L2 norm of UMean2 - UMean1 relative to that of the window's UMean.
-
-    Parameters
-    ----------
-    case_dir : Path
-        The (reconstructed) case.
-    state : dict
-        Case description (patches, ``cfd.solver.transient`` tolerances, ``cfd.physics.rho``).
-    plan : dict
-        :func:`transient_plan` (the solver times of the window).
-    mid, end : str
-        Names of the time folders at the middle and at the end of the window.
-    peak_velocity : float
-        Largest inlet velocity [m/s].
-
-    Returns
-    -------
-    dict
-        ``halves``: {``first``, ``second``, ``window``: {``inlet_minus_outlet_pressure_Pa``,
-        ``tawss_mean_Pa``}}, ``half_window_differences``: {``inlet_minus_outlet_pressure``,
-        ``tawss_mean``, ``U_L2``} (relative), ``tolerances`` (the same keys), ``stationary``
-        (bool), ``why`` (one line, when not stationary).
-    """
-    tr = state["cfd"]["solver"]["transient"]
-    rho = float(state["cfd"]["physics"]["rho"])
-    dp1, dp2, dpw = _half_window_pressures(case_dir, state, plan)
-    dp_scale = max(abs(dpw), 0.1 * 0.5 * peak_velocity**2)
-    tm1, tm2, tmw = _half_window_tawss(case_dir, state, mid, end)
-    l2 = _half_window_velocity(case_dir, mid, end)
-    diffs = {
-        "inlet_minus_outlet_pressure": abs(dp2 - dp1) / dp_scale,
-        "tawss_mean": abs(tm2 - tm1) / max(abs(tmw), 1e-300),
-        "U_L2": l2,
-    }
-    tols = {
-        "inlet_minus_outlet_pressure": float(tr["stationarity_tolerance"]),
-        "tawss_mean": float(tr["stationarity_tolerance"]),
-        "U_L2": float(tr["stationarity_tolerance_U"]),
-    }
-    bad = [k for k in diffs if not diffs[k] <= tols[k]]  # NaN counts as not stationary
-    out: dict[str, Any] = {
-        "halves": {
-            "first": {"inlet_minus_outlet_pressure_Pa": dp1 * rho, "tawss_mean_Pa": tm1 * rho},
-            "second": {"inlet_minus_outlet_pressure_Pa": dp2 * rho, "tawss_mean_Pa": tm2 * rho},
-            "window": {"inlet_minus_outlet_pressure_Pa": dpw * rho, "tawss_mean_Pa": tmw * rho},
-        },
-        "half_window_differences": diffs,
-        "tolerances": tols,
-        "pressure_difference_scale_Pa": dp_scale * rho,
-        "stationary": not bad,
-    }
-    if bad:
-        out["why"] = _not_stationary_why(plan, diffs, tols, bad)
-    return out
-
-
-def _half_window_pressures(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]) -> tuple[float, float, float]:
-    """The inlet-outlet pressure difference (kinematic) over the first half, the second half and
-    the whole averaging window (see :func:`stationarity`)."""
-    t_w, t_m, t_e = plan["averaging_start_time"], plan["mid_time"], plan["end_time"]
-    # dp of each half from the per-step patch averages (time-weighted, as fieldAverage does)
-    inlets = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
-    outlets = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
-
-    def dp(a: float, b: float) -> float:
-        pin = [window_mean(case_dir, f"pressure_{n}", a, b) for n in inlets]
-        pout = [window_mean(case_dir, f"pressure_{n}", a, b) for n in outlets]
-        vin = [v for v in pin if v is not None]
-        vout = [v for v in pout if v is not None]
-        if len(vin) != len(pin) or len(vout) != len(pout) or not vin or not vout:
-            raise ValueError(f"no patch pressure written between solver times {a:g} and {b:g}")
-        return vin[0] - float(np.mean(vout))
-
-    return dp(t_w, t_m), dp(t_m, t_e), dp(t_w, t_e)
-
-
-def _half_window_tawss(case_dir: Path, state: dict[str, Any], mid: str, end: str) -> tuple[float, float, float]:
-    """The area-mean TAWSS (kinematic) of the first half, the second half and the whole window
-    (see :func:`stationarity`)."""
-    # TAWSS: area-mean of magWallShearStressMean (linear in the mean, so second half = 2 M - M1)
-    walls = _wall_faces(case_dir, state)
-    area = np.concatenate([a for _, a in walls])
-    tm1 = float((_wall_values(case_dir / mid, "magWallShearStressMean", walls) * area).sum() / area.sum())
-    tmw = float((_wall_values(case_dir / end, "magWallShearStressMean", walls) * area).sum() / area.sum())
-    tm2 = 2.0 * tmw - tm1
-    return tm1, tm2, tmw
-
-
-def _half_window_velocity(case_dir: Path, mid: str, end: str) -> float:
-    """Volume-weighted L2 norm of the second half's mean U minus the first half's, relative to
-    that of the window's (see :func:`stationarity`)."""
-    # U: volume-weighted L2
-    vol = read_internal_field(case_dir / end / "V")
-    u1 = read_internal_field(case_dir / mid / "UMean", len(vol))
-    uw = read_internal_field(case_dir / end / "UMean", len(vol))
-    if u1.shape != uw.shape or len(uw) != len(vol):
-        raise ValueError(f"UMean ({u1.shape}, {uw.shape}) and V ({vol.shape}) do not match")
-    u2 = 2.0 * uw - u1
-    return volume_l2_ratio(vol, u2 - u1, uw)
-
-
-def _not_stationary_why(plan: dict[str, Any], diffs: dict[str, float], tols: dict[str, float], bad: list[str]) -> str:
-    """The reason of a window that is not stationary, in one line (see :func:`stationarity`)."""
-    return (
-        f"time average not stationary: the two halves of the {plan['window_s']:.4g} s averaging window "
-        f"({plan['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
-        f"{plan['washout_s']:.3g} s wash-out) differ by "
-        + ", ".join(f"{100 * diffs[k]:.3g} % in {_HALF_WORDS[k]} (tolerance {100 * tols[k]:g} %)" for k in bad)
-        + "; lengthen cfd.solver.transient.flow_throughs or max_doublings (or washout_flow_throughs)"
-    )
-
-
-def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any], halves: dict[str, Any]) -> None:
-    """``transient.png``: the inlet-outlet pressure difference over the transient run, the window
-    and its two half means (best effort, never fails)."""
+def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any], verdict: dict[str, Any]) -> None:
+    """``transient.png``: the inlet-outlet pressure difference over the transient run, its running
+    mean over the averaging window and the final mean with its error bar (best effort, never fails)."""
     try:
         import matplotlib
 
@@ -536,19 +646,22 @@ def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any],
         import matplotlib.pyplot as plt
 
         rho = float(state["cfd"]["physics"]["rho"])
-        ins = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
-        outs = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
-        a = function_series(case_dir, f"pressure_{ins[0]}")
-        outs_s = [function_series(case_dir, f"pressure_{n}") for n in outs]
-        sel = a[:, 0] > plan["start_time"]
-        t = a[sel, 0] - plan["start_time"]
-        po = np.mean([np.interp(a[sel, 0], o[:, 0], o[:, 1]) for o in outs_s], axis=0)
+        rec = _records(case_dir, state, plan["start_time"], plan["start_time"] + 1e9)
+        t = rec["t"] - plan["start_time"]
+        t_w = plan["averaging_start_time"] - plan["start_time"]
         fig, ax = plt.subplots(figsize=(7, 4))
-        ax.plot(t, (a[sel, 1] - po) * rho, lw=0.6, label="instantaneous")
-        t_w, t_m, t_e = (plan[k] - plan["start_time"] for k in ("averaging_start_time", "mid_time", "end_time"))
-        ax.axvspan(t_w, t_e, alpha=0.1, label="averaging window")
-        for (a0, b0), half in ((t_w, t_m), halves["first"]), ((t_m, t_e), halves["second"]):
-            ax.hlines(half["inlet_minus_outlet_pressure_Pa"], a0, b0, colors="k")
+        ax.plot(t, rec["dp"] * rho, lw=0.5, label="instantaneous")
+        sel = t > t_w
+        if sel.sum() > 1:
+            w = np.diff(np.concatenate([[t_w], t[sel]]))
+            run_mean = np.cumsum(w * rec["dp"][sel]) / np.cumsum(w) * rho
+            ax.plot(t[sel], run_mean, "k", lw=1.2, label="running mean")
+            s = verdict["statistics"]["inlet_minus_outlet_pressure"]
+            m, hw = s["mean_Pa"], s["half_width_Pa"]
+            if np.isfinite(hw):
+                ax.axhspan(m - hw, m + hw, xmin=0, xmax=1, color="k", alpha=0.15,
+                           label=f"mean +- {100 * verdict['confidence']:g} % interval")  # fmt: skip
+        ax.axvspan(t_w, t[-1], alpha=0.08, label="averaging window")
         ax.set_xlabel(f"time since the end of SIMPLE [s] (flow-through time {plan['flow_through_time_s']:.3g} s)")
         ax.set_ylabel("p(inlet) - p(outlet) [Pa]")
         ax.grid(True, alpha=0.3)

@@ -1,0 +1,128 @@
+"""The error bar of a time average (vcs.cfd.timeseries) against processes whose answers are known:
+an Ornstein-Uhlenbeck process (exponential autocorrelation, integral time scale tau, variance of
+the mean 2 tau sigma^2 / T), a sine (T_int = P / (2 pi)), a constant; and the SIMPLE early stop
+of a stalled run (vcs.cfd.steady.PlateauWatch) on synthetic solver logs."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from vcs.cfd.timeseries import integral_time_scale, mean_error, time_weighted_mean, uniform_record
+
+
+def _ou(rng: np.random.Generator, n: int, dt: float, tau: float, sigma: float = 1.0) -> np.ndarray:
+    """An Ornstein-Uhlenbeck record: the exact AR(1) discretisation, started from its stationary law."""
+    a = math.exp(-dt / tau)
+    e = rng.standard_normal(n)
+    x = lfilter([sigma * math.sqrt(1 - a * a)], [1, -a], e, zi=[a * sigma * rng.standard_normal()])[0]
+    return x
+
+
+def test_integral_time_scale_of_known_processes():
+    rng = np.random.default_rng(0)
+    dt, tau = 1e-3, 0.02
+    ts = [integral_time_scale(_ou(rng, 20000, dt, tau), dt) for _ in range(20)]
+    assert np.mean(ts) == pytest.approx(tau, rel=0.15)  # exp(-s/tau) integrates to tau
+    period = 0.1
+    t = np.arange(0, 5, dt)
+    assert integral_time_scale(np.sin(2 * np.pi * t / period), dt) == pytest.approx(period / (2 * np.pi), rel=0.02)
+    assert integral_time_scale(np.full(100, 3.0), dt) == 0.0
+
+
+def test_confidence_interval_covers_the_true_mean():
+    """95 % intervals of 300 independent OU records of 100 integral time scales cover the true mean
+    in 90-99 % of them, and the standard error matches the spread of the means and the exact
+    sqrt(2 tau / T) sigma within 15 %."""
+    rng = np.random.default_rng(1)
+    dt, tau, T, mu = 2e-3, 0.05, 5.0, 3.0
+    n = int(T / dt)
+    t = dt * np.arange(1, n + 1)
+    res = [mean_error(t, mu + _ou(rng, n, dt, tau), 0.0) for _ in range(300)]
+    means = np.array([r["mean"] for r in res])
+    se = np.array([r["standard_error"] for r in res])
+    cover = np.mean([abs(r["mean"] - mu) <= r["half_width"] for r in res])
+    assert 0.90 <= cover <= 0.99, cover
+    exact = math.sqrt(2 * tau / T)
+    assert np.std(means) == pytest.approx(exact, rel=0.15)
+    assert np.median(se) == pytest.approx(exact, rel=0.15)
+    assert all(r["bound"] == "statistics" and r["n_batches"] >= 5 for r in res)
+
+
+def test_short_record_is_not_known_and_range_bounds_a_settled_signal():
+    rng = np.random.default_rng(2)
+    dt, tau = 1e-3, 0.05
+    t = dt * np.arange(1, 201)  # 4 integral time scales: fewer than 5 batches of 5 T_int
+    x = _ou(rng, 200, dt, tau)
+    r = mean_error(t, x, 0.0)
+    # the statistics cannot tell (infinite); the record's range is the only bound
+    assert r["n_batches"] < 5 and r["standard_error"] == math.inf
+    assert r["bound"] == "range" and r["half_width"] == pytest.approx(0.5 * np.ptp(x))
+    # a laminar flow settling: an exponential approach, range 1e-4 of the mean: known to 5e-5 at once
+    x = 10.0 * (1 + 1e-4 * np.exp(-t / 0.1))
+    r = mean_error(t, x, 0.0)
+    assert r["bound"] == "range" and r["half_width"] == pytest.approx(0.5 * np.ptp(x)) and r["half_width"] < 1e-3
+    # a constant is known exactly
+    assert mean_error(t, np.full(200, 2.0), 0.0)["half_width"] == 0.0
+
+
+def test_time_weighting_and_uniform_record():
+    t = np.array([0.1, 0.2, 0.5, 1.0])  # steps of 0.1, 0.1, 0.3, 0.5
+    x = np.array([1.0, 2.0, 3.0, 4.0])
+    assert float(time_weighted_mean(t, x, 0.0)) == pytest.approx((0.1 + 0.2 + 0.9 + 2.0) / 1.0)
+    assert float(time_weighted_mean(t, x, 0.2)) == pytest.approx((0.9 + 2.0) / 0.8)
+    xu, dt = uniform_record(t, x, 0.0)
+    assert dt == pytest.approx(0.25) and xu[-1] == pytest.approx(4.0) and len(xu) == 4
+    many = mean_error(t, np.column_stack([x, 2 * x]), 0.0)
+    assert many["mean"] == pytest.approx([time_weighted_mean(t, x, 0.0), 2 * time_weighted_mean(t, x, 0.0)])
+
+
+def _simple_log(path: Path, residuals: list[float]) -> None:
+    rows = []
+    for i, r in enumerate(residuals, start=51):
+        rows.append(
+            f"Time = {i}\n\n"
+            f"smoothSolver:  Solving for Ux, Initial residual = {r:.6g}, Final residual = {0.1 * r:.6g}, "
+            "No Iterations 2\n"
+            f"smoothSolver:  Solving for Uy, Initial residual = {r:.6g}, Final residual = {0.1 * r:.6g}, "
+            "No Iterations 2\n"
+            f"smoothSolver:  Solving for Uz, Initial residual = {r:.6g}, Final residual = {0.1 * r:.6g}, "
+            "No Iterations 2\n"
+            f"GAMG:  Solving for p, Initial residual = {r:.6g}, Final residual = {0.01 * r:.6g}, No Iterations 3\n"
+            f"time step continuity errors : sum local = 1e-06, global = 1e-08, cumulative = 1e-07\n"
+            f"ExecutionTime = {i * 0.1:.3g} s  ClockTime = {i // 10} s\n\n"
+        )
+    path.write_text("".join(rows))
+
+
+@pytest.mark.parametrize(
+    ("name", "residuals", "stops", "stalled"),
+    [
+        # an unsteady flow: SIMPLE hovers at 1e-2 (AortaCFD patient1's coarctation jet)
+        ("hovering high", [1e-2 * (1 + 0.3 * math.sin(i / 7)) for i in range(320)], True, True),
+        # the same for only 250 iterations: fewer than three windows above max_residual, left alone
+        ("high, too early", [1e-2 * (1 + 0.3 * math.sin(i / 7)) for i in range(250)], False, False),
+        # a real-mesh plateau below max_residual: stopped for the plateau check after two windows
+        ("plateau low", [2e-5 * (1 + 0.1 * math.sin(i / 5)) for i in range(210)], True, False),
+        # still converging by a decade per 100 iterations: left alone
+        ("converging", [1e-2 * 10 ** (-i / 100) for i in range(320)], False, False),
+    ],
+)
+def test_simple_early_stop(tmp_path, name, residuals, stops, stalled):
+    from vcs.cfd.steady import PlateauWatch
+
+    (tmp_path / "system").mkdir()
+    control = tmp_path / "system" / "controlDict"
+    control.write_text("stopAt          endTime;\nendTime 1000;\n")
+    log = tmp_path / "log.simpleFoam"
+    _simple_log(log, residuals)
+    watch = PlateauWatch(tmp_path, {"plateau": {"iterations": 100, "max_residual": 1e-3, "early_stop": True}})
+    watch(log)
+    assert ("writeNow" in control.read_text()) is stops, name
+    assert (watch.stopped_at is not None) is stops and watch.stalled is stalled
+    if stops:
+        assert watch.report()["above_max_residual"] is stalled

@@ -1,0 +1,207 @@
+"""Statistics of a time average from one finite, autocorrelated record (pure numpy/scipy).
+
+The transient solve averages a turbulent-like or periodic flow over a window; how well that
+window's mean is known depends on how long the window is against the time over which the signal
+forgets itself, its integral time scale. Two standard estimates of the standard error of the mean
+are combined (the larger is kept, so that neither a short record nor a slowly decaying
+autocorrelation makes the error look smaller than it is):
+
+* the integral-time-scale estimate: var(mean) = 2 T_int sigma^2 / T (e.g. Bendat & Piersol,
+  *Random Data*, 4th ed., Eq. 8.17; Tennekes & Lumley 1972, Sec. 6.4), T_int the integral of the
+  autocorrelation up to its first zero crossing;
+* batch means: the record cut into ``n_b`` consecutive batches, each at least
+  :data:`BATCH_INTEGRAL_SCALES` integral time scales long (nearly independent), var(mean) =
+  var(batch means) / n_b (Fishman 1978; Law & Kelton, *Simulation Modeling and Analysis*, Sec. 9.5.3),
+
+and the confidence interval is Student's t with ``n_b - 1`` degrees of freedom. With fewer than
+:data:`MIN_BATCHES` batches the statistical error is not known yet (infinite). Whatever the
+statistics, a window's mean lies within the range of the values averaged: half the record's
+range (max - min) bounds the error too, and the smaller of the two bounds is reported (a laminar
+flow settling to a steady state has a long, slowly decaying autocorrelation but a range far inside
+any tolerance; ``bound`` says which one was used).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import stats
+
+BATCH_INTEGRAL_SCALES = 5.0
+"""Batch length in integral time scales (batch means of an exponentially correlated signal 5 T_int
+apart correlate by ~0.1)."""
+
+MIN_BATCHES = 5
+"""Fewest batches for an error bar (below it the mean's error is unknown: infinite)."""
+
+
+def uniform_record(t: ArrayLike, x: ArrayLike, start: float | None = None) -> tuple[NDArray[np.floating], float]:
+    """A solver's record on a uniform time grid, for its autocorrelation.
+
+    Parameters
+    ----------
+    t : (n,) float
+        Increasing times (an adjustable time step: not uniform). Row i stands for the step ending
+        at ``t[i]`` (as OpenFOAM's function objects write it).
+    x : (n,) or (n, m) float
+        Values (``m`` signals side by side).
+    start : float, optional
+        Start of the window (default: the first time); rows at or before it are dropped.
+
+    Returns
+    -------
+    (N, ...) float, float
+        ``x`` linearly interpolated on N = number of rows equally spaced times from the window's
+        start to its last time, and that spacing (0 for fewer than 2 rows).
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if start is not None:
+        keep = t > start
+        t, x = t[keep], x[keep]
+        t0 = float(start)
+    else:
+        t0 = float(t[0]) if len(t) else 0.0
+    n = len(t)
+    if n < 2:
+        return x, 0.0
+    tu = np.linspace(t0, float(t[-1]), n + 1)[1:]
+    dt = float(tu[1] - tu[0])
+    if x.ndim == 1:
+        return np.interp(tu, t, x), dt
+    return np.column_stack([np.interp(tu, t, x[:, j]) for j in range(x.shape[1])]), dt
+
+
+def time_weighted_mean(t: ArrayLike, x: ArrayLike, start: float) -> NDArray[np.floating]:
+    """Mean over the window (start, t[-1]], each row weighted by its time step (fieldAverage's
+    ``base time`` mean). ``x`` (n,) or (n, m): returns a scalar array or (m,)."""
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    keep = t > start
+    t, x = t[keep], x[keep]
+    w = np.diff(np.concatenate([[start], t]))
+    return np.tensordot(w, x, axes=(0, 0)) / w.sum()
+
+
+def integral_time_scale(x: ArrayLike, dt: float) -> float:
+    """Integral time scale of a uniformly sampled signal: the integral of its autocorrelation
+    rho(s) = <x'(t) x'(t + s)> / <x'^2> from 0 to the first zero crossing (trapezoid rule).
+
+    Parameters
+    ----------
+    x : (n,) float
+        The signal on a uniform grid of spacing ``dt``.
+    dt : float
+        The spacing.
+
+    Returns
+    -------
+    float
+        T_int (s); 0 for a constant signal; the record length when rho never crosses zero (the
+        record is shorter than the signal's memory).
+    """
+    x = np.asarray(x, dtype=float)
+    n = len(x)
+    xp = x - x.mean()
+    var = float(xp @ xp)
+    if n < 2 or var <= 1e-300 * n or not np.isfinite(var):
+        return 0.0
+    m = 1 << int(2 * n - 1).bit_length()
+    f = np.fft.rfft(xp, m)
+    acf = np.fft.irfft(f * np.conj(f), m)[:n] / var  # biased estimate: rho(0) = 1, |rho| <= 1
+    neg = np.flatnonzero(acf <= 0.0)
+    if not len(neg):
+        return n * dt
+    k = int(neg[0])
+    # up to the zero crossing, interpolated between the last positive lag and the first non-positive
+    area = float(np.trapezoid(acf[:k], dx=dt)) if k > 1 else 0.0
+    a, b = float(acf[k - 1]), float(acf[k])
+    return area + 0.5 * a * (a / (a - b)) * dt
+
+
+def mean_error(
+    t: ArrayLike, x: ArrayLike, start: float, confidence: float = 0.95, t_int: float | None = None
+) -> dict[str, Any]:
+    """Time average of a record over (start, t[-1]] and the half-width of its confidence interval.
+
+    Parameters
+    ----------
+    t : (n,) float
+        Times (any spacing; row i stands for the step ending at ``t[i]``).
+    x : (n,) or (n, m) float
+        One signal, or ``m`` signals (each gets its own scale and error).
+    start : float
+        Start of the averaging window.
+    confidence : float
+        Confidence level of the interval (0.95).
+    t_int : float, optional
+        The integral time scale to use (default: each signal's own, :func:`integral_time_scale`).
+
+    Returns
+    -------
+    dict
+        ``mean``, ``std`` (of the signal), ``integral_time_s``, ``n_batches``,
+        ``standard_error`` (the larger of the integral-time-scale and batch-means estimates),
+        ``half_width`` (the smaller of t quantile x standard error (inf with fewer than
+        :data:`MIN_BATCHES` batches) and half the record's range), ``bound`` (``statistics`` or
+        ``range``), ``window_s``: floats (``bound`` a str), or (m,) arrays for ``m`` signals.
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    one = x.ndim == 1
+    xs = x[:, None] if one else x
+    keep = t > start
+    out: dict[str, list[Any]] = {k: [] for k in ("mean", "std", "integral_time_s", "n_batches", "standard_error")}
+    out["half_width"] = []
+    out["bound"] = []
+    window = float(t[keep][-1] - start) if keep.any() else 0.0
+    for j in range(xs.shape[1]):
+        r = _one_mean_error(t[keep], xs[keep, j], start, window, confidence, t_int)
+        half_range = 0.5 * float(np.ptp(xs[keep, j])) if keep.any() else math.inf
+        if half_range < r["half_width"]:
+            r["half_width"], r["bound"] = half_range, "range"
+        else:
+            r["bound"] = "statistics"
+        for k, v in r.items():
+            out[k].append(v)
+    res: dict[str, Any] = {k: (v[0] if one else np.array(v)) for k, v in out.items()}
+    res["window_s"] = window
+    return res
+
+
+def _one_mean_error(
+    t: NDArray[np.floating],
+    x: NDArray[np.floating],
+    start: float,
+    window: float,
+    confidence: float,
+    t_int: float | None,
+) -> dict[str, float]:
+    """:func:`mean_error` of one signal already cut to its window."""
+    if len(t) < 2 or window <= 0:
+        nan = float("nan")
+        return {"mean": nan, "std": nan, "integral_time_s": nan, "n_batches": 0, "standard_error": math.inf,
+                "half_width": math.inf}  # fmt: skip
+    mean = float(time_weighted_mean(t, x, start))
+    xu, dt = uniform_record(t, x, start)
+    std = float(np.std(xu))
+    ti = integral_time_scale(xu, dt) if t_int is None else float(t_int)
+    if std <= 1e-12 * max(abs(mean), 1e-300):  # a constant signal: known exactly
+        return {"mean": mean, "std": std, "integral_time_s": ti, "n_batches": len(xu), "standard_error": 0.0,
+                "half_width": 0.0}  # fmt: skip
+    batch = max(BATCH_INTEGRAL_SCALES * ti, dt)
+    nb = int(window // batch)
+    if nb < MIN_BATCHES:
+        return {"mean": mean, "std": std, "integral_time_s": ti, "n_batches": nb, "standard_error": math.inf,
+                "half_width": math.inf}  # fmt: skip
+    per = len(xu) // nb
+    means = xu[len(xu) - nb * per :].reshape(nb, per).mean(axis=1)  # the last nb * per samples
+    se_batch = float(np.std(means, ddof=1) / math.sqrt(nb))
+    se_acf = std * math.sqrt(2.0 * ti / window)
+    se = max(se_batch, se_acf)
+    q = float(stats.t.ppf(0.5 + 0.5 * confidence, nb - 1))
+    return {"mean": mean, "std": std, "integral_time_s": ti, "n_batches": nb, "standard_error": se,
+            "half_width": q * se}  # fmt: skip
