@@ -10,7 +10,7 @@ Needs OpenFOAM; ~3 hours on 2 cores (5.4 CPU hours of solver) (README, "An atlas
 temporary folder) is the Snakemake working directory; a finished DIR is only re-read. Prints, per
 patient: cells, jet cells across, layer coverage, SIMPLE iterations, flow-through time, wash-out +
 window, pimpleFoam time steps and their size, the relative error bars (95 % half-widths) of the
-test, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers (their
+window means, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers (their
 logs' ExecutionTime), the patient's wall time (the five workflow jobs) and the verdict; then the
 atlas. A patient that failed gets '-' where it has no figure and its reason.
 """
