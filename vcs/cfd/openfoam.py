@@ -114,7 +114,7 @@ DEFAULTS: dict[str, Any] = {
             "confidence": 0.95,  # confidence level of those intervals
             "max_co": 1.0,  # Courant number limit on the cells the flow crosses
             "max_co_end_cells": 4.0,  # at most this on the slivers snapped at the end planes
-            "outer_correctors": 2,  # PIMPLE outer correctors when some cells run above Co 1
+            "outer_correctors": 1,  # PIMPLE outer correctors when some cells run above Co 1 (1: PISO-like)
         },
         "timeout_s": None,  # wall-clock limit per utility call [s]
     },

@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""The transient solve's cost and answers under several PIMPLE settings, from one SIMPLE state.
+
+    .venv/bin/python bench/transient_cost.py CASE -d DIR [--variant NAME:key=value,...]...
+
+CASE is a rendered case (``results/patients/<id>/case`` of a workflow run, or any
+:func:`vcs.cfd.render_case` output). The case is copied to DIR/simple and solved there with
+``fallback: none`` (meshing and SIMPLE, once: a finished DIR/simple is reused); then every variant
+copies that SIMPLE state to DIR/<NAME> and runs :func:`vcs.cfd.transient.transient_fallback` with
+its ``cfd.solver.transient`` keys changed (e.g. ``co1:max_co_end_cells=1`` holds every cell at
+Co 1, the pre-issue-23 time step). Default variants: ``co1`` (Co <= 1 on every cell, PISO),
+``default`` (the configuration's), ``outer2`` (the end-plane factor with 2 outer correctors).
+
+Prints, per variant: pimpleFoam CPU s (its logs' ExecutionTime), time steps, dt range, the
+window in flow-through times, and each mean with its 95 % half-width (inlet-outlet pressure
+difference, area-mean TAWSS) and the relative U half-width; then the machine and its load.
+Variants run one after the other (one core each); a finished variant's DIR is re-read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import sys
+from datetime import date
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from jet_atlas import solver_cpu_s  # noqa: E402
+
+from vcs.cfd.case import CASE_JSON, inlet_profile  # noqa: E402
+from vcs.cfd.run import _read_state, run_case  # noqa: E402
+from vcs.cfd.transient import transient_fallback  # noqa: E402
+from vcs.cfd.utilities import _Runner  # noqa: E402
+
+DEFAULT_VARIANTS = ["co1:max_co_end_cells=1,outer_correctors=1", "default:", "outer2:outer_correctors=2"]
+
+
+def _value(v: str) -> float | int:
+    return int(v) if v.isdigit() else float(v)
+
+
+def parse_variant(text: str) -> tuple[str, dict[str, float | int]]:
+    """``name:key=value,...`` -> (name, {key: value})."""
+    name, _, rest = text.partition(":")
+    keys = dict(kv.split("=", 1) for kv in rest.split(",") if kv)
+    return name, {k: _value(v) for k, v in keys.items()}
+
+
+def simple_state(case: Path, work: Path) -> tuple[Path, dict]:
+    """The case meshed and solved by SIMPLE only (fallback none), in work/simple (reused)."""
+    dst = work / "simple"
+    if not (dst / "status.json").exists():
+        shutil.rmtree(dst, ignore_errors=True)
+        shutil.copytree(case, dst, ignore=shutil.ignore_patterns("processor*", "postProcessing"))
+        st = json.loads((dst / CASE_JSON).read_text())
+        st["cfd"]["solver"]["fallback"] = "none"
+        (dst / CASE_JSON).write_text(json.dumps(st))
+        run_case(dst, ranks=1)
+    return dst, json.loads((dst / "status.json").read_text())
+
+
+def run_variant(simple: Path, status: dict, work: Path, name: str, keys: dict) -> dict:
+    """The transient solve of one variant from the SIMPLE state (re-read when finished)."""
+    dst = work / name
+    out = dst / "transient_status.json"
+    if out.exists():
+        return json.loads(out.read_text())
+    shutil.rmtree(dst, ignore_errors=True)
+    shutil.copytree(simple, dst)
+    state = _read_state(dst, 1)
+    state["cfd"]["solver"]["fallback"] = "transient"
+    state["cfd"]["solver"]["transient"].update(keys)
+    st = {**status, "timings_s": {}}
+    prof = inlet_profile(dst, state)
+    transient_fallback(dst, state, st, _Runner(dst, st["timings_s"], None), 1, prof)
+    st["pimple_cpu_s"] = solver_cpu_s(dst) - solver_cpu_s(simple)
+    out.write_text(json.dumps(st, indent=1, default=float))
+    return st
+
+
+def row(name: str, st: dict) -> str:
+    tr = st.get("transient") or {}
+    if not tr.get("evaluated"):
+        return f"| {name} | failed: {st.get('reason')} |"
+    s = tr["statistics"]
+    dp, w = s["inlet_minus_outlet_pressure"], s["tawss_mean"]
+    c = tr["courant"]
+    return (
+        f"| {name} | {c['pimple_max_co']:.3g} / {c['outer_correctors']} | {st['pimple_cpu_s']:.0f} | "
+        f"{sum(tr['time_steps'].values()):,} | {1e3 * tr['delta_t_s']['min']:.3g}-{1e3 * tr['delta_t_s']['max']:.3g} | "
+        f"{tr['washout_flow_throughs']:.2g} + {tr['window_flow_throughs']:.3g} | "
+        f"{dp['mean_Pa']:.4g} +- {dp['half_width_Pa']:.2g} | {w['mean_Pa']:.4g} +- {w['half_width_Pa']:.2g} | "
+        f"{100 * tr['relative_errors'].get('U', float('nan')):.2g} | {'yes' if tr['stationary'] else 'no'} |"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    ap.add_argument("case", type=Path, help="a rendered case")
+    ap.add_argument("-d", "--workdir", type=Path, required=True, help="where the copies are solved")
+    ap.add_argument("--variant", action="append", help="NAME:key=value,... (cfd.solver.transient keys)")
+    a = ap.parse_args(argv)
+    if not (a.case / CASE_JSON).exists():
+        print(f"transient_cost: error: {a.case} is not a rendered case (no {CASE_JSON})", file=sys.stderr)
+        return 2
+    a.workdir.mkdir(parents=True, exist_ok=True)
+    simple, status = simple_state(a.case.resolve(), a.workdir.resolve())
+    print(
+        f"SIMPLE state: {status['cells']:,} cells, {status['iterations']} iterations, converged "
+        f"{status['converged']} ({status.get('reason')})"
+    )
+    print(
+        "| variant | maxCo / outer correctors | pimpleFoam CPU s | time steps | dt ms | wash-out + window FT "
+        "| dp Pa (95 %) | mean TAWSS Pa (95 %) | U +-% | known |"
+    )
+    print("|---" * 10 + "|")
+    for text in a.variant or DEFAULT_VARIANTS:
+        name, keys = parse_variant(text)
+        print(row(name, run_variant(simple, status, a.workdir.resolve(), name, keys)), flush=True)
+    print(f"{date.today()}, {platform.node()} ({os.cpu_count()} cores), load {os.getloadavg()[0]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
