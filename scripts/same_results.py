@@ -3,6 +3,7 @@
 
     python scripts/same_results.py fits OUT_DIR         # vcs fit on a fixed corpus -> OUT_DIR/<name>/
     python scripts/same_results.py compare DIR_A DIR_B  # exit 1 unless every result file matches
+    python scripts/same_results.py compare --rtol 1e-9 DIR_A DIR_B  # model.json numbers within 1e-9
 
 ``fits`` runs ``vcs fit`` (this checkout's code) with default settings on the three CI aorta
 phantoms, a tube, a torus and a helix phantom, and on every real mesh of ``../shared/data``
@@ -10,7 +11,10 @@ that is present. ``compare`` walks two result trees (e.g. ``results/`` of two CI
 ``snakemake --configfile config/ci.yaml`` before and after a change, or two ``fits`` folders)
 and compares every ``model.json``, ``fit_report.json`` (timings left out), ``wall.stl`` and
 phantom STL byte by byte, and every ``fields.npz`` array by array (dtype, shape and bits; timings ``*_time_s`` left
-out; an npz archive also stores its write time, so its bytes differ between runs).
+out; an npz archive also stores its write time, so its bytes differ between runs). With ``--rtol R`` a
+``model.json`` or ``fit_report.json`` that differs is compared number by number instead: every number
+within R times the largest magnitude of its array (round-off), everything else equal; the largest
+relative difference is printed.
 """
 
 from __future__ import annotations
@@ -35,6 +39,14 @@ REAL = {
     "aortacfd": (
         "aortacfd_patient1/wall_aorta.stl",
         ["--inlet-cap", "aortacfd_patient1/inlet.stl", "--outlet-cap", "aortacfd_patient1/outlet4.stl"],
+    ),
+    "vmr0154": (
+        "sphinxsys_vmr0154_aorta_capped.stl",
+        ["--units=cm", "--inlet=-0.911,4.689,3.648", "--outlet=-1.593,-0.865,0.994"],
+    ),
+    "tah_coarse": (
+        "sphinxsys_tah_aorta_capped_coarse.stl",
+        ["--units=mm", "--inlet=-23.0,-202.2,-1177.9", "--outlet=6.6,-123.6,-1246.3"],
     ),
 }
 BYTE_FILES = ("model.json", "wall.stl")
@@ -100,7 +112,46 @@ def _same_npz(a: Path, b: Path) -> str | None:
     return None
 
 
-def compare(a: Path, b: Path) -> int:
+def _numbers(d, path=""):
+    """The numbers of a parsed JSON document as {path: list of floats}, its other values as {path: value}."""
+    nums: dict[str, list[float]] = {}
+    other: dict[str, object] = {}
+
+    def walk(x, p):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                walk(v, f"{p}/{k}")
+        elif isinstance(x, list) and x and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in x):
+            nums.setdefault(p, []).extend(float(v) for v in x)
+        elif isinstance(x, list):
+            for v in x:
+                walk(v, p + "[]")
+        elif isinstance(x, float):
+            nums.setdefault(p, []).append(x)
+        else:
+            other[p] = x
+
+    walk(d, path)
+    return nums, other
+
+
+def _close_json(da, db, rtol: float) -> tuple[str | None, float]:
+    """None when two parsed JSON documents hold the same values, their numbers within ``rtol`` of
+    the largest magnitude of their array; and the largest relative difference."""
+    (na, oa), (nb, ob) = _numbers(da), _numbers(db)
+    if oa != ob or na.keys() != nb.keys():
+        return "differs beyond its numbers", float("inf")
+    worst = 0.0
+    for k in na:
+        x, y = np.asarray(na[k]), np.asarray(nb[k])
+        if x.shape != y.shape:
+            return f"'{k}' has {len(x)} vs {len(y)} numbers", float("inf")
+        scale = max(float(np.abs(x).max(initial=0.0)), 1e-300)
+        worst = max(worst, float(np.abs(x - y).max(initial=0.0)) / scale)
+    return (None if worst <= rtol else f"numbers differ by {worst:.2g} (relative) > {rtol:g}"), worst
+
+
+def compare(a: Path, b: Path, rtol: float | None = None) -> int:
     """Compare the result files of two trees; print one line per file; 0 when all match."""
     names = ("model.json", "fit_report.json", "wall.stl", "fields.npz")
     files = sorted(
@@ -109,9 +160,10 @@ def compare(a: Path, b: Path) -> int:
     if not files:
         print(f"no result files under {a}")
         return 1
-    bad = 0
+    bad = close = 0
     for rel in files:
         pa, pb = a / rel, b / rel
+        ja = jb = None
         if not pa.exists() or not pb.exists():
             why = "missing in " + ("A" if not pa.exists() else "B")
         elif rel.name == "fields.npz":
@@ -121,9 +173,20 @@ def compare(a: Path, b: Path) -> int:
             why = None if ja == jb else "differs (timings and input path ignored)"
         else:
             why = None if pa.read_bytes() == pb.read_bytes() else "bytes differ"
+            if rel.name == "model.json":
+                ja, jb = (json.loads(p.read_text()) for p in (pa, pb))
+        if why and rtol is not None and ja is not None:
+            why, worst = _close_json(ja, jb, rtol)
+            if why is None:
+                close += 1
+                print(f"CLOSE {rel}: numbers within {worst:.2g} (relative)")
+                continue
         bad += why is not None
         print(f"{'SAME' if why is None else 'DIFF'}  {rel}" + (f": {why}" if why else ""))
-    print(f"{len(files) - bad} of {len(files)} result files identical")
+    print(
+        f"{len(files) - bad - close} of {len(files)} result files identical"
+        + (f", {close} within --rtol" if rtol else "")
+    )
     return 1 if bad else 0
 
 
@@ -135,11 +198,12 @@ def main() -> int:
     c = sub.add_parser("compare", help="compare two result trees")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)
+    c.add_argument("--rtol", type=float, help="model.json: numbers within RTOL of their array's largest magnitude")
     args = p.parse_args()
     if args.cmd == "fits":
         run_fits(args.out)
         return 0
-    return compare(args.a, args.b)
+    return compare(args.a, args.b, args.rtol)
 
 
 if __name__ == "__main__":

@@ -110,18 +110,24 @@ def rotation_minimizing_frame(
     (n, 3) float
         v1 at every sample (unit, normal to the tangent).
     """
+    # the reflections' planes do not depend on v: computed for all samples at once (np.vecdot is
+    # numpy's dot product, row by row: the same numbers as `@` on each pair); only the two dot
+    # products with v are sequential (n ~ 4k: ~20 ms, was ~55 ms all in the loop)
     n = len(points)
+    dx = np.diff(points, axis=0)
+    s1 = 2.0 / np.vecdot(dx, dx)
+    t_l = tangents[:-1] - (s1 * np.vecdot(dx, tangents[:-1]))[:, None] * dx  # t_i reflected
+    b = tangents[1:] - t_l
+    c2 = np.vecdot(b, b)
+    turn = c2 > 1e-300  # the second reflection takes the reflected t_i onto t_(i+1)
+    s2 = 2.0 / np.where(turn, c2, 1.0)
     v = np.empty((n, 3))
     v[0] = v1_0
-    dx = np.diff(points, axis=0)
-    for i in range(n - 1):  # sequential by nature; n ~ 4k: a few ms
-        v1 = dx[i]
-        c1 = v1 @ v1
-        r_l = v[i] - (2.0 / c1) * (v1 @ v[i]) * v1
-        t_l = tangents[i] - (2.0 / c1) * (v1 @ tangents[i]) * v1
-        v2 = tangents[i + 1] - t_l
-        c2 = v2 @ v2
-        r = r_l - (2.0 / c2) * (v2 @ r_l) * v2 if c2 > 1e-300 else r_l
+    r = v[0]
+    for i in range(n - 1):
+        r = r - (s1[i] * (dx[i] @ r)) * dx[i]
+        if turn[i]:
+            r = r - (s2[i] * (b[i] @ r)) * b[i]
         v[i + 1] = r
     v -= np.sum(v * tangents, axis=1, keepdims=True) * tangents
     return v / np.linalg.norm(v, axis=1, keepdims=True)

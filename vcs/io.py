@@ -312,8 +312,12 @@ def _merge_and_deduplicate(
             f"{n_merged} duplicate vertices merged (closer than {tol:.2g} file units, "
             f"{MERGE_TOLERANCE:g} of the median edge): the triangles were not connected"
         )
-    key = np.sort(faces, axis=1)
-    _, first_face = np.unique(key, axis=0, return_index=True)
+    key = np.sort(faces, axis=1).astype(np.int64)
+    n = int(key.max()) + 1 if len(key) else 1
+    if n < 2**21:  # one int64 key per triangle: the same first occurrences as rows, ~10x faster
+        _, first_face = np.unique((key[:, 0] * n + key[:, 1]) * n + key[:, 2], return_index=True)
+    else:
+        _, first_face = np.unique(key, axis=0, return_index=True)
     if len(first_face) < len(faces):
         keep = np.zeros(len(faces), bool)
         keep[first_face] = True

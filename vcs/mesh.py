@@ -114,14 +114,13 @@ def vertex_normals(vertices: NDArray[np.floating], faces: NDArray[np.integer]) -
         Unit normals (dimensionless); (0, 0, 0) for a vertex used by no face.
     """
     cross = triangle_cross(vertices[faces])
-    n = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(n, faces[:, k], cross)
+    idx = faces.T.ravel()  # corner 0 of every face, then corner 1, then corner 2 (np.add.at's order)
+    n = np.column_stack([np.bincount(idx, np.tile(cross[:, k], 3), minlength=len(vertices)) for k in range(3)])
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
 def point_triangle_distance(
-    points: ArrayLike, tris: NDArray[np.floating], chunk: int = 2_000_000
+    points: ArrayLike, tris: NDArray[np.floating], chunk: int = 131_072
 ) -> NDArray[np.floating]:
     """Exact Euclidean distance from each point to the nearest of the triangles (brute force).
 
@@ -135,7 +134,8 @@ def point_triangle_distance(
     tris : (M, 3, 3) float
         Triangle corners.
     chunk : int
-        Point-triangle pairs per vectorised block (memory bound).
+        Point-triangle pairs per vectorised block (~270 bytes each: 35 MB by default; at least
+        one point per block).
 
     Returns
     -------
@@ -496,9 +496,10 @@ def consistent_winding(vertices: NDArray[np.floating], faces: NDArray[np.integer
 
     m = len(faces)
     he, fid = half_edges(faces)
-    key = np.sort(he, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
+    key = np.sort(he, axis=1).astype(np.int64)
+    n = int(key.max()) + 1 if len(key) else 1
+    # 1-D keys (rows in the same lexicographic order as np.unique(axis=0), ~10x faster)
+    _, inv, cnt = np.unique(key[:, 0] * n + key[:, 1], return_inverse=True, return_counts=True)
     manifold = cnt[inv] == 2
     order = np.argsort(inv[manifold], kind="stable")
     pair_f = fid[manifold][order].reshape(-1, 2)
@@ -517,15 +518,18 @@ def consistent_winding(vertices: NDArray[np.floating], faces: NDArray[np.integer
     pair_w = np.concatenate([w, w])
     srt = np.argsort(pair_key)
     pair_key, pair_w = pair_key[srt], pair_w[srt]
-    flip = [False] * m
-    for c in range(n_comp):
-        root = int(np.flatnonzero(labels == c)[0])
+    # BFS tree of each component; a face flips when the swaps on its path to the root are odd
+    up = np.arange(m)  # the BFS parent (roots: themselves)
+    flip_mask = np.zeros(m, bool)  # swaps between a face and up[face], then (below) its root
+    roots = np.unique(labels, return_index=True)[1]  # the first face of each component
+    for root in roots.tolist():
         nodes, pred = breadth_first_order(G, root, directed=False, return_predecessors=True)
         child, parent = nodes[1:].astype(np.int64), pred[nodes[1:]].astype(np.int64)
-        swap = (pair_w[np.searchsorted(pair_key, child * m + parent)] == 2).tolist()
-        for f, p, sw in zip(child.tolist(), parent.tolist(), swap):  # parents come first in BFS order
-            flip[f] = flip[p] ^ sw
-    flip_mask = np.array(flip)
+        up[child] = parent
+        flip_mask[child] = pair_w[np.searchsorted(pair_key, child * m + parent)] == 2
+    while np.any(up[up] != up):  # pointer jumping: log2(tree depth) vectorised passes
+        flip_mask ^= flip_mask[up]
+        up = up[up]
     out = faces.copy()
     out[flip_mask] = out[flip_mask][:, ::-1]
     return out, True
@@ -579,11 +583,11 @@ def self_intersections(
     found: list[NDArray[np.int64]] = []
     for s in range(0, len(a), chunk):
         pa, pb = a[s : s + chunk], b[s : s + chunk]
-        straddle = np.ones(len(pa), bool)
-        for p, q in ((pa, pb), (pb, pa)):
+        for side in (0, 1):  # b's corners about a's plane, then a's about b's for the pairs left
+            p, q = (pa, pb) if side == 0 else (pb, pa)
             d = np.einsum("ijk,ik->ij", tri[q] - tri[p, :1], n[p])
-            straddle &= (d > tol).any(axis=1) & (d < -tol).any(axis=1)
-        pa, pb = pa[straddle], pb[straddle]
+            straddle = (d > tol).any(axis=1) & (d < -tol).any(axis=1)
+            pa, pb = pa[straddle], pb[straddle]
         hit = _edges_cross(faces64, tri, pa, pb) | _edges_cross(faces64, tri, pb, pa)
         found += [pa[hit], pb[hit]]
     return np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)

@@ -18,9 +18,9 @@ from scipy import sparse
 from scipy.interpolate import BSpline, NdBSpline
 from scipy.sparse import linalg as sparse_linalg
 
-from vcs.centerline import uniform_knots
+from vcs.centerline import group_median, uniform_knots
 from vcs.errors import VCSInputError
-from vcs.mesh import triangle_cross, vertex_adjacency, vertex_normals
+from vcs.mesh import edge_topology, triangle_cross, vertex_adjacency, vertex_normals
 
 if TYPE_CHECKING:
     from vcs.model import VesselCoordinateSystem
@@ -268,7 +268,13 @@ def lsq_wall(
     -------
     WallModel
     """
-    B = tensor_design_matrix(tau, theta, K, R)
+    return _solve_wall(tensor_design_matrix(tau, theta, K, R), rho, weights, K, R, smoothing)
+
+
+def _solve_wall(
+    B: sparse.csr_matrix, rho: ArrayLike, weights: ArrayLike, K: int, R: int, smoothing: float
+) -> WallModel:
+    """The solve of :func:`lsq_wall` given its design matrix ``B`` (N, (K + 4) (R + 1)) at the samples."""
     W = sparse.diags(np.asarray(weights, float))
     A = (B.T @ W @ B).tocsc()
     P = _penalty(K, R)
@@ -469,10 +475,8 @@ def fit_wall(
 
     def ring_median() -> np.ndarray:
         """Median radius of the wall kept so far, per tau ring (branches found so far left out)."""
-        med = np.full(n_bins, np.nan)
         keep = reason == 0
-        for k in np.unique(b[keep]):
-            med[k] = np.median(rho[keep & (b == k)])
+        med = np.where(np.bincount(b[keep], minlength=n_bins) > 0, group_median(b[keep], rho[keep], n_bins), np.nan)
         ok = np.isfinite(med)
         return np.interp(np.arange(n_bins), np.flatnonzero(ok), med[ok]) if ok.any() else med
 
@@ -483,17 +487,25 @@ def fit_wall(
     ]
     anchors = _end_sections(vcs, vertices, faces, float(np.nanmedian(rho[reason == 0])), end_radii)
     w_anchor = float(np.median(w[reason == 0]))
+    # the design matrix (Eq. 5) of every wall vertex that may take part, then of the anchors, built
+    # once: each fit takes its rows (the same rows, in the same order, as built afresh)
+    cand_v = np.flatnonzero((reason == 0) | (reason == 2))
+    row_of = np.full(len(vertices), -1)
+    row_of[cand_v] = np.arange(len(cand_v))
+    B_all = tensor_design_matrix(
+        np.concatenate([tau[cand_v], anchors[0]]), np.concatenate([theta[cand_v], anchors[1]]), K, R
+    )
+    anchor_rows = len(cand_v) + np.arange(len(anchors[0]))
 
     def fit() -> WallModel:
         """LSQ on the kept wall; where branches were cut out, the ring's median radius stands in
         (so the gap is filled like the wall around it instead of by unconstrained spline); the
         wall's cuts by the two end planes pin rho_w at tau = 0 and 1 (no extrapolation there)."""
         sel, fill = reason == 0, reason == 4
-        t_ = np.concatenate([tau[sel], tau[fill], anchors[0]])
-        a_ = np.concatenate([theta[sel], theta[fill], anchors[1]])
+        rows = np.concatenate([row_of[sel], row_of[fill], anchor_rows])
         r_ = np.concatenate([rho[sel], ring_median()[b[fill]], anchors[2]])
         w_ = np.concatenate([w[sel], w[fill], np.full(len(anchors[0]), w_anchor)])
-        return lsq_wall(t_, a_, r_, w_, K, R, smoothing)
+        return _solve_wall(B_all[rows], r_, w_, K, R, smoothing)
 
     model: WallModel  # assigned by the first pass of the loop
     for _ in range(6):
@@ -612,8 +624,7 @@ def _end_sections(
         theta in rad, rho in mm.
     """
     out: list[list[float]] = [[], [], []]
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
+    e = edge_topology(faces)[0]  # unique edges, rows sorted, in lexicographic order
     for t_end, r_end in zip((0.0, 1.0), end_radii if end_radii is not None else (np.inf, np.inf)):
         t, v1, v2 = (a[0] for a in vcs.frame(np.array([t_end])))
         c = vcs.curve(t_end)

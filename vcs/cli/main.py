@@ -140,28 +140,34 @@ def _terminate_as_interrupt() -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
-def _import_heavy_modules() -> None:
+#: C-extension modules every command may use, imported before it runs (:func:`_import_heavy_modules`).
+HEAVY_MODULES = (
+    "pyvista",
+    "vtkmodules.vtkCommonCore",
+    "vtkmodules.vtkCommonDataModel",
+    "vtkmodules.vtkFiltersCore",
+    "vtkmodules.vtkFiltersGeneral",
+    "vtkmodules.vtkIOGeometry",
+    "vtkmodules.vtkIOLegacy",
+    "vtkmodules.vtkIOPLY",
+    "vtkmodules.vtkIOXML",
+    "scipy.interpolate",
+    "scipy.ndimage",
+    "scipy.sparse.csgraph",
+    "scipy.spatial",
+    "vcs.vessel",
+)
+
+
+def _import_heavy_modules(extra: Sequence[str] = ()) -> None:
     """Import the C-extension modules the commands use (VTK's readers, writers and filters that
-    pyvista would load lazily, scipy's, trimesh), so that none is imported while a command runs."""
+    pyvista would load lazily, scipy's: :data:`HEAVY_MODULES`) and those only one command needs
+    (``extra``: a command's ``heavy_modules`` default, e.g. trimesh for `vcs wall`), so that none
+    is imported while a command runs. trimesh (with networkx and PIL, ~0.3 s) is only imported
+    by the commands that use it."""
     import importlib
 
-    for name in (
-        "pyvista",
-        "vtkmodules.vtkCommonCore",
-        "vtkmodules.vtkCommonDataModel",
-        "vtkmodules.vtkFiltersCore",
-        "vtkmodules.vtkFiltersGeneral",
-        "vtkmodules.vtkIOGeometry",
-        "vtkmodules.vtkIOLegacy",
-        "vtkmodules.vtkIOPLY",
-        "vtkmodules.vtkIOXML",
-        "scipy.interpolate",
-        "scipy.ndimage",
-        "scipy.sparse.csgraph",
-        "scipy.spatial",
-        "trimesh",
-        "vcs.vessel",
-    ):
+    for name in (*HEAVY_MODULES, *extra):
         importlib.import_module(name)
 
 
@@ -188,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     _terminate_as_interrupt()
     with signals_held():  # a Ctrl-C inside a C extension's import crashes Python (SIGSEGV) or
-        _import_heavy_modules()  # leaves a half-imported module: import them all first, held
+        _import_heavy_modules(getattr(args, "heavy_modules", ()))  # leaves a half-imported module: import first
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )

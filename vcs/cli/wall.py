@@ -137,7 +137,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         choices=["mm", "cm", "m"],
         help="units of the STL (OpenFOAM: m); default: the units of the fitted mesh (model.json)",
     )
-    w.set_defaults(func=cmd_wall)
+    w.set_defaults(func=cmd_wall, heavy_modules=("trimesh",))  # check_closed uses trimesh
 
     g = subparsers.add_parser("grid", help="write the (tau, theta, rho_n) measurement grid as VTU")
     g.add_argument("model", help="model.json from `vcs fit`")
