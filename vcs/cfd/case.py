@@ -238,6 +238,7 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "residual_control": True,
         "transient": False,
         "average": False,
+        "monitors": False,
         "cell_volumes": False,
         "max_co": cfd["solver"]["transient"]["max_co"],
         "outer_correctors": 1,

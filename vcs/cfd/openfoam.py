@@ -104,7 +104,10 @@ DEFAULTS: dict[str, Any] = {
         "fallback": "transient",  # none | transient: if SIMPLE does not converge, run pimpleFoam
         # from the SIMPLE state and report time averages (converged only when stationary)
         "transient": {
-            "washout_flow_throughs": 1.0,  # start-up wash-out before averaging [flow-through times V_lumen / Q]
+            # start-up wash-out before averaging [flow-through times V_lumen / Q]: ended once the
+            # start-up transient is over (MSER-5), after at least min_washout_flow_throughs
+            "washout_flow_throughs": 1.0,
+            "min_washout_flow_throughs": 0.25,
             "min_flow_throughs": 1.0,  # shortest averaging window [flow-through times]
             # longest: a window whose means are not known to the tolerance by then is not stationary
             "max_flow_throughs": 10.0,
@@ -267,6 +270,7 @@ def check_cfd(cfd: dict[str, Any]) -> None:
         if gone in tr:
             raise VCSInputError(f"cfd.solver.transient.{gone} was replaced: {new}")
     _number(cfd, "solver.transient.washout_flow_throughs", 0.0, 1e3)
+    _number(cfd, "solver.transient.min_washout_flow_throughs", 0.0, 1e3)
     _number(cfd, "solver.transient.min_flow_throughs", 0.0, 1e3, lo_open=True)
     _number(cfd, "solver.transient.max_flow_throughs", 0.0, 1e4, lo_open=True)
     if float(tr["max_flow_throughs"]) < float(tr["min_flow_throughs"]):

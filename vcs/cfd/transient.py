@@ -22,7 +22,7 @@ from vcs.cfd.case import render_files
 from vcs.cfd.foamfiles import function_series, parse_solver_log, patch_geometry, read_dat, read_internal_field
 from vcs.cfd.status import _log_summary, _wall_faces
 from vcs.cfd.steady import STAGE_FILES, request_write_now
-from vcs.cfd.timeseries import mean_error
+from vcs.cfd.timeseries import mean_error, mser_truncation, uniform_record
 from vcs.cfd.utilities import Stop, _fmt_time, _Runner, _solver_failure, _time_dirs, progress
 
 N_PROBES = 64
@@ -74,6 +74,7 @@ def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak
     tr = cfd["solver"]["transient"]
     t_ft = volume / float(state["flow_rate"])
     washout = _round_up(float(tr["washout_flow_throughs"]) * t_ft)
+    washout_min = min(_round_up(float(tr["min_washout_flow_throughs"]) * t_ft), washout)
     w_min = _round_up(float(tr["min_flow_throughs"]) * t_ft)
     w_max = max(_round_up(float(tr["max_flow_throughs"]) * t_ft), w_min)
     if state.get("mesh_sizing"):
@@ -89,6 +90,8 @@ def transient_plan(state: dict[str, Any], volume: float, start_time: float, peak
         "flow_through_time_s": t_ft,
         "washout_s": washout,
         "washout_flow_throughs": washout / t_ft,
+        "min_washout_s": washout_min,
+        "max_washout_s": washout,
         "min_window_s": w_min,
         "min_window_flow_throughs": w_min / t_ft,
         "max_window_s": w_max,
@@ -147,7 +150,9 @@ def transient_fallback(
         tr["courant"] = {k: v for k, v in cour.items() if k != "probe_points"}
         common.update(max_co=cour["pimple_max_co"], outer_correctors=cour["outer_correctors"])
         peak = float(prof["peak_velocity"])
-        end = _run_washout_and_window(case_dir, state, run, ranks, plan, common, cour["probe_points"], tr, root, peak)
+        common["probe_points"] = cour["probe_points"]
+        plan = _run_washout(case_dir, state, run, ranks, plan, common, tr, root)
+        end = _run_window(case_dir, state, run, ranks, plan, common, tr, root, peak)
         verdict = window_statistics(case_dir, state, plan["averaging_start_time"], end[0], peak)
         _log_verdict(verdict)
         _record_verdict(case_dir, state, status, tr, plan, verdict, simple_reason)
@@ -324,58 +329,105 @@ def courant_plan(
     return out
 
 
-def _run_washout_and_window(
+def _run_stage(
+    case_dir: Path,
+    state: dict[str, Any],
+    run: _Runner,
+    ranks: int,
+    name: str,
+    end: float,
+    common: dict[str, Any],
+    tr: dict[str, Any],
+    root: Path,
+    watch: Any,
+    *,
+    average: bool,
+) -> dict[str, Any]:
+    """One pimpleFoam stage (``washout`` or ``average``) from the latest time to ``end`` (or until
+    ``watch`` stops it), writing only at its end; its time steps, time step range and Courant
+    number merged into ``tr``. Returns the parsed log; raises :class:`Stop` when it fails."""
+    render_files(
+        case_dir,
+        state,
+        STAGE_FILES,
+        end_time=_fmt_time(end),
+        write_interval=_fmt_time(end - _time_dirs(root)[-1][0]),
+        average=average,
+        monitors=True,
+        **common,
+    )
+    log = f"pimpleFoam.{name}"
+    r = run(["pimpleFoam"], log, ranks, watch=watch)
+    parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
+    tr.setdefault("time_steps", {})[name] = len(parsed["rows"])
+    dt = tr.get("delta_t_s") or {}
+    lo = [x for x in (dt.get("min"), parsed["delta_t_min"]) if x]
+    hi = [x for x in (dt.get("max"), parsed["delta_t_max"]) if x]
+    tr["delta_t_s"] = {"min": min(lo, default=None), "max": max(hi, default=None)}
+    co = [c for c in (tr.get("courant_max"), parsed["courant_max"]) if c is not None]
+    tr["courant_max"] = max(co, default=None)
+    if r.returncode != 0:
+        raise Stop(_solver_failure(case_dir / "logs" / f"log.{log}", name, "pimpleFoam"), log)
+    return parsed
+
+
+def _run_washout(
     case_dir: Path,
     state: dict[str, Any],
     run: _Runner,
     ranks: int,
     plan: dict[str, Any],
     common: dict[str, Any],
-    probe_points: list[list[float]],
+    tr: dict[str, Any],
+    root: Path,
+) -> dict[str, Any]:
+    """The wash-out: pimpleFoam from the SIMPLE state, ended by :class:`WashoutWatch` once the
+    start-up transient is over (at least ``min_washout_flow_throughs``, at most
+    ``washout_flow_throughs``). Returns the plan with the window moved to start where the
+    wash-out ended (``washout_s``, ``averaging_start_time``, ``min_end_time``, ``max_end_time``)."""
+    if plan["washout_s"] <= 0:
+        return plan
+    watch = WashoutWatch(case_dir, state, plan)
+    _run_stage(case_dir, state, run, ranks, "washout", plan["averaging_start_time"], common, tr, root, watch,
+               average=False)  # fmt: skip
+    end = _time_dirs(root)[-1]
+    if end[0] <= plan["start_time"]:
+        raise Stop("the wash-out wrote no time folder", "pimpleFoam.washout")
+    washout = end[0] - plan["start_time"]
+    moved = {
+        **plan,
+        "washout_s": washout,
+        "washout_flow_throughs": washout / plan["flow_through_time_s"],
+        "averaging_start_time": end[0],
+        "min_end_time": end[0] + plan["min_window_s"],
+        "max_end_time": end[0] + plan["max_window_s"],
+    }
+    tr.update(moved)
+    tr["washout"] = watch.report()
+    return moved
+
+
+def _run_window(
+    case_dir: Path,
+    state: dict[str, Any],
+    run: _Runner,
+    ranks: int,
+    plan: dict[str, Any],
+    common: dict[str, Any],
     tr: dict[str, Any],
     root: Path,
     peak_velocity: float,
 ) -> tuple[float, str]:
-    """pimpleFoam: the wash-out (when there is one), then the averaging window (fieldAverage, the
-    records judged while it runs by :class:`AverageWatch`, written at its end); time steps,
-    Courant number and the last log in ``tr``. Returns the end's time folder (solver time,
-    name); raises :class:`Stop` when a stage fails."""
-    steps: dict[str, int] = {}
-    tr["time_steps"] = steps
-    stages = []
-    if plan["washout_s"] > 0:
-        stages.append(("washout", plan["averaging_start_time"], False))
-    stages.append(("average", plan["max_end_time"], True))
-    parsed: dict[str, Any] = {}
-    lo, hi, co = [], [], []
-    watch = None
-    for name, end, average in stages:
-        render_files(
-            case_dir,
-            state,
-            STAGE_FILES,
-            end_time=_fmt_time(end),
-            write_interval=_fmt_time(end - _time_dirs(root)[-1][0]),
-            average=average,
-            probe_points=probe_points if average else None,
-            **common,
-        )
-        log = f"pimpleFoam.{name}"
-        watch = AverageWatch(case_dir, state, plan, peak_velocity) if average else None
-        r = run(["pimpleFoam"], log, ranks, watch=watch)
-        parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
-        steps[name] = len(parsed["rows"])
-        lo.append(parsed["delta_t_min"])
-        hi.append(parsed["delta_t_max"])
-        co.append(parsed["courant_max"])
-        if r.returncode != 0:
-            raise Stop(_solver_failure(case_dir / "logs" / f"log.{log}", name, "pimpleFoam"), log)
-    tr["courant_max"] = max((c for c in co if c is not None), default=None)
-    tr["delta_t_s"] = {"min": min((x for x in lo if x), default=None), "max": max((x for x in hi if x), default=None)}
+    """The averaging window (fieldAverage; the records judged while it runs by
+    :class:`AverageWatch`, the means written at its end). Returns the end's time folder (solver
+    time, name); raises :class:`Stop` when the stage fails or ends off the plan."""
+    watch = AverageWatch(case_dir, state, plan, peak_velocity)
+    parsed = _run_stage(case_dir, state, run, ranks, "average", plan["max_end_time"], common, tr, root, watch,
+                        average=True)  # fmt: skip
     tr["solver_log"] = _log_summary(parsed, case_dir / "logs" / "log.pimpleFoam.average")
     if parsed["rows"]:
         tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
-    if watch is not None and watch.stopped_at is not None:
+    if watch.stopped_at is not None:
         tr["ended_early_at"] = watch.stopped_at
     written = [t for t in _time_dirs(root) if t[0] > plan["averaging_start_time"] + 1e-9]
     if not written:
@@ -392,6 +444,74 @@ def _run_washout_and_window(
     tr["end_time"] = end_dir[0]
     tr["end_time_folder"] = end_dir[1]
     return end_dir
+
+
+MSER_OVER = 1.0 / 3.0
+"""The wash-out is over when every record's MSER-5 truncation point lies in its first third
+(:func:`vcs.cfd.timeseries.mser_truncation`): what follows the start-up is at least twice as
+long as the start-up (on a decaying transient plus noise this ends the wash-out at 2-3 times the
+transient's length: ``tests/vcs/test_timeseries.py``)."""
+
+
+class WashoutWatch:
+    """Ends the wash-out once the start-up transient is over: every :data:`CHECK_EVERY_S` s of wall
+    clock, after ``min_washout_flow_throughs``, it reads the records since the SIMPLE state
+    (inlet-outlet pressure difference, area-mean |WSS|, mean speed at the probe cells) and finds
+    each one's MSER-5 truncation point; when all lie in the first :data:`MSER_OVER` of the
+    record it asks pimpleFoam to write and stop (``stopAt writeNow``). The averaging window starts
+    there."""
+
+    def __init__(self, case_dir: Path, state: dict[str, Any], plan: dict[str, Any]) -> None:
+        self.case_dir, self.state, self.plan = case_dir, state, plan
+        self.next_look = time.monotonic() + CHECK_EVERY_S
+        self.stopped_at: float | None = None
+        self.fractions: dict[str, float] = {}
+
+    def __call__(self, log: Path) -> None:
+        """Look at the records (at most every :data:`CHECK_EVERY_S` s); stop the solver once (see class)."""
+        if self.stopped_at is not None or time.monotonic() < self.next_look:
+            return
+        self.next_look = time.monotonic() + CHECK_EVERY_S
+        t0 = self.plan["start_time"]
+        try:
+            rec = _records(self.case_dir, self.state, t0, math.inf)
+        except (ValueError, OSError, IndexError):  # nothing yet, or a record caught mid-write
+            return
+        now = float(rec["t"][-1])
+        if now - t0 < self.plan["min_washout_s"]:
+            return
+        self.fractions = washout_fractions(rec, t0)
+        if max(self.fractions.values()) < MSER_OVER:
+            request_write_now(self.case_dir / "system" / "controlDict")
+            self.stopped_at = now
+            progress.info(
+                "wash-out: start-up transient over after %.3g flow-through times (MSER-5 truncation at %s of the "
+                "record); stopping pimpleFoam, the averaging window starts there",
+                (now - t0) / self.plan["flow_through_time_s"],
+                ", ".join(f"{k} {100 * v:.0f} %" for k, v in self.fractions.items()),
+            )
+
+    def report(self) -> dict[str, Any]:
+        """status.json ``transient.washout``: where it ended and why."""
+        return {
+            "ended_early_at": self.stopped_at,
+            "mser_truncation_fractions": self.fractions,
+            "over_below_fraction": MSER_OVER,
+        }
+
+
+def washout_fractions(rec: dict[str, Any], start: float) -> dict[str, float]:
+    """The MSER-5 truncation point (fraction of the record) of each record since ``start``
+    (:func:`_records`; U as the mean speed over the probe cells)."""
+    series = {"inlet_minus_outlet_pressure": rec["dp"], "tawss_mean": rec["tawss"]}
+    if rec["U"] is not None:
+        u = rec["U"].reshape(len(rec["t"]), -1, 3)
+        series["U"] = np.linalg.norm(u, axis=2).mean(axis=1)
+    out = {}
+    for k, x in series.items():
+        xu, _ = uniform_record(rec["t"], x, start)
+        out[k] = mser_truncation(xu)
+    return out
 
 
 class AverageWatch:
