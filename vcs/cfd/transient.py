@@ -149,6 +149,9 @@ def transient_fallback(
         cour = courant_plan(case_dir, state, run, ranks, root, plan)
         tr["courant"] = {k: v for k, v in cour.items() if k != "probe_points"}
         common.update(max_co=cour["pimple_max_co"], outer_correctors=cour["outer_correctors"])
+        if cour["delta_t_expected_s"]:  # the first step at the Courant limit of the SIMPLE state, not the
+            # inlet's (a coarctation jet is 5x faster than the inflow: Co 9 in the first step otherwise)
+            common["delta_t"] = _fmt_time(min(cour["delta_t_expected_s"], plan["max_delta_t_s"]))
         peak = float(prof["peak_velocity"])
         common["probe_points"] = cour["probe_points"]
         plan = _run_washout(case_dir, state, run, ranks, plan, common, tr, root)
