@@ -785,8 +785,8 @@ def arc_length_table(curve: BSpline, u: NDArray[np.floating]) -> NDArray[np.floa
     """
     d = curve.derivative()
     mid = 0.5 * (u[1:] + u[:-1])
-    sp = lambda x: np.linalg.norm(d(x), axis=-1)  # noqa: E731
-    seg = (u[1:] - u[:-1]) / 6.0 * (sp(u[:-1]) + 4 * sp(mid) + sp(u[1:]))
+    speed = np.linalg.norm(d(u), axis=-1)  # each node once (both intervals next to it use it)
+    seg = (u[1:] - u[:-1]) / 6.0 * (speed[:-1] + 4 * np.linalg.norm(d(mid), axis=-1) + speed[1:])
     return np.concatenate([[0.0], np.cumsum(seg)])
 
 
@@ -880,8 +880,9 @@ def choose_n_knots(
     tau = interior_samples(ref_d[[0, -1]], curve_length(reference))
     trials: list[dict] = []
     curves: dict[int, BSpline] = {}
+    samples = equal_arc_samples(reference, 1000)  # the same data for every L
     for L in [v for v in L_LADDER if v <= max(max_knots, L_LADDER[0])]:
-        curve = fit_to_curve(reference, L, end_directions=end_directions, n_samples=1000)
+        curve = fit_to_curve(reference, L, end_directions=end_directions, n_samples=1000, samples=samples)
         dev = speed_deviation(curve)
         c = curve(tau)
         ratio = float(np.min(lumen.distance_at(c) / ref_d[tree.query(c)[1]]))
@@ -907,6 +908,7 @@ def fit_to_curve(
     end_directions: tuple[ArrayLike, ArrayLike] | None = None,
     n_samples: int = 2000,
     passes: int = 2,
+    samples: tuple[NDArray[np.floating], NDArray[np.floating]] | None = None,
 ) -> BSpline:
     """A centerline with ``n_knots`` uniform interior knots fitted to a curve at equal arc length (Eq. 1).
 
@@ -927,19 +929,38 @@ def fit_to_curve(
         Arc-length samples (n above).
     passes : int
         Arc-length refits afterwards.
+    samples : (tau, points) or None
+        :func:`equal_arc_samples` of ``reference`` with ``n_samples``, if already computed.
 
     Returns
     -------
     BSpline
         Degree 3, control points (L + 4, 3) in mm.
     """
-    dense = np.linspace(0.0, 1.0, 8 * n_samples + 1)
-    s = arc_length_table(reference, dense)
-    tau = np.linspace(0.0, 1.0, n_samples + 1)
-    pts = reference(np.interp(tau * s[-1], s, dense))
+    tau, pts = equal_arc_samples(reference, n_samples) if samples is None else samples
     d0, d1 = end_directions if end_directions is not None else (None, None)
     curve = _lsq_fixed_ends(tau, pts, uniform_knots(n_knots), pts[0], pts[-1], smooth=1e-9, d0=d0, d1=d1)
     return reparametrise_by_arc_length(curve, end_directions=end_directions, n_resample=n_samples, passes=passes)
+
+
+def equal_arc_samples(reference: BSpline, n_samples: int) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """``n_samples`` + 1 points of a curve equally spaced in arc length, and tau = i / n_samples.
+
+    Parameters
+    ----------
+    reference : BSpline
+        The curve (any parametrisation), mm.
+    n_samples : int
+
+    Returns
+    -------
+    tau : (n_samples + 1,) float
+    points : (n_samples + 1, 3) float, mm
+    """
+    dense = np.linspace(0.0, 1.0, 8 * n_samples + 1)
+    s = arc_length_table(reference, dense)
+    tau = np.linspace(0.0, 1.0, n_samples + 1)
+    return tau, reference(np.interp(tau * s[-1], s, dense))
 
 
 def interior_samples(end_radii: ArrayLike, length: float, n: int = 801) -> NDArray[np.floating]:

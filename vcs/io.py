@@ -20,7 +20,7 @@ from vcs.errors import VCSInputError
 from vcs.mesh import connected_faces, consistent_winding, default_vessel_component, lumen_chords, triangle_cross
 
 if TYPE_CHECKING:
-    import pyvista as pv
+    from vtkmodules.vtkCommonDataModel import vtkPolyData
 
 log = logging.getLogger(__name__)
 
@@ -214,46 +214,117 @@ def _is_ascii_stl(path: Path) -> bool:
     return head.lstrip().startswith(b"solid") and len(lines) > 1 and lines[1].strip()[:5] in (b"facet", b"endso")
 
 
-def _read_ascii_stl_solids(path: Path) -> pv.PolyData:
+def _read_ascii_stl_solids(path: Path) -> vtkPolyData:
     """An ASCII STL read by VTK's STL reader (as pyvista does) with its solids as a cell array.
 
     A multi-solid STL (``solid wall`` ... ``solid inlet`` ...) gets the cell array
     ``STLSolidLabeling`` (0, 1, ... in file order), so that caps written as separate solids are
     labelled caps (:func:`vcs.ends.list_ends`); a single-solid file gets no array.
     """
-    import pyvista as pv
+    from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkIOGeometry import vtkSTLReader
 
     reader = vtkSTLReader()
     reader.SetFileName(str(path))
     reader.ScalarTagsOn()
     reader.Update()
-    mesh = pv.wrap(reader.GetOutput())
-    if "STLSolidLabeling" in mesh.cell_data and len(np.unique(mesh.cell_data["STLSolidLabeling"])) < 2:
-        del mesh.cell_data["STLSolidLabeling"]
+    mesh = reader.GetOutput()
+    solids = mesh.GetCellData().GetArray("STLSolidLabeling")
+    if solids is not None and len(np.unique(vtk_to_numpy(solids))) < 2:
+        mesh.GetCellData().RemoveArray("STLSolidLabeling")
     return mesh
 
 
-def _read_polydata(path: Path) -> pv.PolyData:
-    """Read any pyvista-readable surface file as PolyData (VTK reader errors -> VCSInputError)."""
-    import pyvista as pv
+#: The VTK reader of each surface extension (module, class): the ones :func:`pyvista.read` uses.
+_VTK_READERS = {
+    ".stl": ("vtkmodules.vtkIOGeometry", "vtkSTLReader"),
+    ".vtp": ("vtkmodules.vtkIOXML", "vtkXMLPolyDataReader"),
+    ".vtk": ("vtkmodules.vtkIOLegacy", "vtkDataSetReader"),
+    ".ply": ("vtkmodules.vtkIOPLY", "vtkPLYReader"),
+    ".obj": ("vtkmodules.vtkIOGeometry", "vtkOBJReader"),
+}
+
+
+def _read_with_vtk(path: Path) -> vtkPolyData:
+    """The surface in ``path`` read by its VTK reader (:data:`_VTK_READERS`), as pyvista.read does it
+    (a legacy .vtk reads all its arrays; a failed update raises); another kind of data set than
+    PolyData (a legacy .vtk volume mesh) gives its outer surface (pyvista's ``extract_surface``)."""
+    import importlib
+
+    from vtkmodules.vtkCommonDataModel import vtkPolyData
+
+    module, name = _VTK_READERS[path.suffix.lower()]
+    reader = getattr(importlib.import_module(module), name)()
+    reader.SetFileName(str(path))
+    if name == "vtkDataSetReader":
+        for what in ("Scalars", "ColorScalars", "Normals", "TCoords", "Vectors", "Fields", "Tensors"):
+            getattr(reader, f"ReadAll{what}On")()
+    if reader.Update() == 0:  # VTK >= 9.7 says whether the update worked (older: None)
+        raise RuntimeError(f"{name} failed")
+    mesh = reader.GetOutputDataObject(0)
+    if mesh is None:
+        raise RuntimeError(f"{name} produced no output")
+    if not isinstance(mesh, vtkPolyData):  # rare: loads pyvista (held signals: no SIGSEGV on Ctrl-C)
+        import pyvista as pv
+
+        mesh = pv.wrap(mesh).extract_surface()
+    return mesh
+
+
+def _read_polydata(path: Path) -> vtkPolyData:
+    """Read a surface file (:data:`SURFACE_EXTENSIONS`) as VTK PolyData (VTK reader errors -> VCSInputError).
+
+    VTK's readers directly (not pyvista, whose import takes ~0.2 s and ~35 MB), the same ones
+    with the same settings as :func:`pyvista.read`.
+    """
     from vtkmodules.vtkCommonCore import vtkObject  # not `import vtk`: that loads all of VTK's ~250 modules
 
     vtkObject.GlobalWarningDisplayOff()  # reader errors become our one-line message
 
     try:
-        with signals_held():  # pyvista imports VTK's reader modules lazily: a Ctrl-C there is a SIGSEGV
-            mesh = _read_ascii_stl_solids(path) if _is_ascii_stl(path) else pv.read(str(path))
+        with signals_held():  # a Ctrl-C inside VTK (or a lazy import of its modules) is a SIGSEGV
+            return _read_ascii_stl_solids(path) if _is_ascii_stl(path) else _read_with_vtk(path)
     except Exception as exc:  # VTK readers raise many kinds of errors
         raise VCSInputError(
             f"cannot read '{path}' as a surface mesh ({type(exc).__name__}); "
             f"give a valid {'/'.join(e[1:].upper() for e in SURFACE_EXTENSIONS)} file"
         ) from None
-    if isinstance(mesh, pv.MultiBlock):
-        mesh = mesh.combine().extract_surface()
-    if not isinstance(mesh, pv.PolyData):
-        mesh = mesh.extract_surface()
-    return mesh
+
+
+def _triangles(
+    mesh: vtkPolyData,
+) -> tuple[NDArray[np.floating], NDArray[np.int64] | None, dict[str, NDArray[Any]]]:
+    """Points, triangles and 1-D numeric cell arrays of a surface after VTK's triangle filter
+    (polygons and strips split into triangles, vertices and lines dropped: pyvista's ``triangulate``).
+
+    Returns
+    -------
+    points : (N, 3) float
+    faces : (M, 3) int64, or None when the filter left no triangle
+    cell_data : dict of str -> (M,) array
+        Copies (no view into VTK's memory).
+    """
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersCore import vtkTriangleFilter
+
+    tri = vtkTriangleFilter()
+    tri.SetInputData(mesh)
+    tri.PassVertsOff()
+    tri.PassLinesOff()
+    tri.Update()
+    out = tri.GetOutput()
+    points = vtk_to_numpy(out.GetPoints().GetData()).astype(float) if out.GetPoints() else np.zeros((0, 3))
+    polys = out.GetPolys()
+    conn = vtk_to_numpy(polys.GetConnectivityArray()).astype(np.int64)
+    size = np.diff(vtk_to_numpy(polys.GetOffsetsArray()))
+    faces = conn.reshape(-1, 3) if len(size) and np.all(size == 3) else None
+    cells = out.GetCellData()
+    cell_data = {}
+    for i in range(cells.GetNumberOfArrays()):
+        arr = cells.GetArray(i)  # None for a non-numeric (string) array
+        if arr is not None and arr.GetNumberOfComponents() == 1:
+            cell_data[cells.GetArrayName(i)] = np.array(vtk_to_numpy(arr))
+    return points, faces, cell_data
 
 
 #: Vertices closer than this fraction of the median edge length are one vertex (:func:`read_surface`).
@@ -372,22 +443,16 @@ def read_surface(path: Path | str, units: str = "auto", *, check_extent: bool = 
     if units not in ("auto", *UNIT_TO_MM):
         raise VCSInputError(f"unknown units '{units}'; use one of auto, mm, cm, m")
     mesh = _read_polydata(path)
-    if mesh.n_points == 0 or mesh.n_cells == 0:
+    if mesh.GetNumberOfPoints() == 0:  # (points without cells: "no triangle faces" below)
         raise VCSInputError(f"'{path}' contains no surface triangles; export the surface again")
-    mesh = mesh.triangulate()
-    faces = np.asarray(mesh.faces).reshape(-1, 4)
-    if faces.size == 0 or np.any(faces[:, 0] != 3):
+    vertices, tri_faces, cell_data = _triangles(mesh)
+    del mesh
+    if tri_faces is None:
         raise VCSInputError(f"'{path}' has no triangle faces (lines or points only); give a surface mesh")
-    faces = faces[:, 1:].astype(np.int64)
-    vertices = np.asarray(mesh.points, dtype=float)
+    faces: NDArray[np.integer] = tri_faces
     if not np.all(np.isfinite(vertices)):
         n_bad = int((~np.isfinite(vertices).all(axis=1)).sum())
         raise VCSInputError(f"'{path}' has {n_bad} vertices with NaN or infinite coordinates; repair the mesh")
-    cell_data = {
-        name: np.asarray(mesh.cell_data[name])
-        for name in mesh.cell_data.keys()
-        if np.asarray(mesh.cell_data[name]).ndim == 1
-    }
     warnings: list[str] = []
     vertices, faces, cell_data = _merge_and_deduplicate(vertices, faces, cell_data, warnings)
     tri = vertices[faces]

@@ -196,6 +196,7 @@ class VesselCoordinateSystem:
             centerline_smoothing_mm=ell,
             short_section=bool(short),
         )
+        timings["checks"] = time.perf_counter() - t_frame  # the report: speed deviation, wall distance
         if choice is not None:
             self.report["L_auto"] = {
                 "criteria_met": choice.met,

@@ -8,6 +8,7 @@ with a small second-difference penalty (instead of the paper's SLSQP on a penali
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -226,6 +227,13 @@ class WallModel:
         return cls(int(d["K"]), int(d["R"]), np.array(d["coefficients"], float))
 
 
+@functools.lru_cache(maxsize=8)
+def _penalty_gram(K: int, R: int) -> sparse.csr_matrix:
+    """P^T P of the second-difference penalty :func:`_penalty` (built once per K, R; not to be modified)."""
+    P = _penalty(K, R)
+    return P.T @ P
+
+
 def _penalty(K: int, R: int) -> sparse.csr_matrix:
     """Second differences of the coefficient grid along tau (open) and theta (periodic)."""
     nt, nth = K + 4, R + 1
@@ -277,9 +285,8 @@ def _solve_wall(
     """The solve of :func:`lsq_wall` given its design matrix ``B`` (N, (K + 4) (R + 1)) at the samples."""
     W = sparse.diags(np.asarray(weights, float))
     A = (B.T @ W @ B).tocsc()
-    P = _penalty(K, R)
     lam = smoothing * A.diagonal().mean()
-    M = A + lam * (P.T @ P)
+    M = A + lam * _penalty_gram(K, R)
     b = sparse_linalg.spsolve(M.tocsc(), B.T @ (np.asarray(weights) * rho))
     return WallModel(K, R, b.reshape(K + 4, R + 1))
 
@@ -497,26 +504,28 @@ def fit_wall(
     )
     anchor_rows = len(cand_v) + np.arange(len(anchors[0]))
 
-    def fit() -> WallModel:
-        """LSQ on the kept wall; where branches were cut out, the ring's median radius stands in
-        (so the gap is filled like the wall around it instead of by unconstrained spline); the
-        wall's cuts by the two end planes pin rho_w at tau = 0 and 1 (no extrapolation there)."""
+    def fit(ring: np.ndarray) -> WallModel:
+        """LSQ on the kept wall; where branches were cut out, the ring's median radius (``ring``,
+        :func:`ring_median` now) stands in (so the gap is filled like the wall around it instead of
+        by unconstrained spline); the wall's cuts by the two end planes pin rho_w at tau = 0 and 1
+        (no extrapolation there)."""
         sel, fill = reason == 0, reason == 4
         rows = np.concatenate([row_of[sel], row_of[fill], anchor_rows])
-        r_ = np.concatenate([rho[sel], ring_median()[b[fill]], anchors[2]])
+        r_ = np.concatenate([rho[sel], ring[b[fill]], anchors[2]])
         w_ = np.concatenate([w[sel], w[fill], np.full(len(anchors[0]), w_anchor)])
         return _solve_wall(B_all[rows], r_, w_, K, R, smoothing)
 
     model: WallModel  # assigned by the first pass of the loop
     for _ in range(6):
-        model = fit()
+        ring = ring_median()
+        model = fit(ring)
         cand = (reason == 0) | (reason == 4)
         pred = model(np.nan_to_num(tau), np.nan_to_num(theta))
         # candidates: far above the fit, or far above the median radius of their tau ring (the
         # fit itself bends toward wide ostia, the ring median does not); a branch is a connected
         # region of candidates that reaches well out of the tube somewhere (hysteresis): bumps,
         # oval sections and a badly fitted stretch stay below ``reach_rel`` and are kept
-        med = ring_median()[b]
+        med = ring[b]
         weak = cand & ((rho - pred > branch_rel * pred) | (rho > (1.0 + 2.5 * branch_rel) * med))
         # a stub reaching past the centre of curvature is outside Omega: it links and seeds too
         far_out = (reason == 2) & (rho > (1.0 + 2.5 * branch_rel) * med)
@@ -538,7 +547,7 @@ def fit_wall(
         reason[_regions_with_seeds(adj, far_out | (reason == 4), reason == 4) & far_out] = 4
     sel = reason == 0
     if (reason == 4).any():
-        model = fit()
+        model = fit(ring_median())
     residual = np.full(len(vertices), np.nan)
     ev = reason >= 0
     residual[ev] = np.abs(rho[ev] - model(np.nan_to_num(tau[ev]), np.nan_to_num(theta[ev])))

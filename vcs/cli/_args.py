@@ -534,6 +534,24 @@ def _remove_dead_stages(path: Path, command: str) -> None:
                 shutil.rmtree(e.path, ignore_errors=True)
 
 
+def seconds_since_process_start() -> float | None:
+    """Wall-clock seconds since this process started (interpreter start-up and imports included),
+    from /proc (Linux, 10 ms resolution); None elsewhere.
+
+    Returns
+    -------
+    float or None
+    """
+    try:
+        with open("/proc/self/stat") as fh:
+            start_ticks = int(fh.read().rsplit(")", 1)[1].split()[19])  # field 22: starttime
+        with open("/proc/uptime") as fh:
+            uptime = float(fh.read().split()[0])
+        return max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK"))
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def write_json(path: Path, data: dict[str, Any]) -> None:
     """Write ``data`` as JSON: indent 1, sorted keys, trailing newline (stable bytes for diffs).
 

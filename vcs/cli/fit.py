@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 import numpy as np
 
@@ -13,6 +14,7 @@ from vcs.cli._args import (
     non_negative_int,
     output_dir,
     positive_int,
+    seconds_since_process_start,
     write_json,
 )
 
@@ -44,6 +46,7 @@ def cmd_fit(args: argparse.Namespace) -> None:
     from vcs.mesh import write_points_vtp, write_polyline_vtp
     from vcs.vessel import fit_vessel
 
+    startup = seconds_since_process_start()
     out = output_dir(args.output, args.mesh, args.inlet_cap, args.outlet_cap, names=(*OUTPUTS, "fit_failed.json"))
     with OutputFolder(out, OUTPUTS, "fit") as folder:
         model, report, wall_fit = fit_vessel(
@@ -59,6 +62,7 @@ def cmd_fit(args: argparse.Namespace) -> None:
             R=args.R,
             recentre_iterations=args.recentre,
         )
+        t_outputs = time.perf_counter()
         s = model.scale_to_mm
         tau = np.linspace(0, 1, 401)
         t, v1, v2 = model.vcs.frame(tau)
@@ -85,6 +89,10 @@ def cmd_fit(args: argparse.Namespace) -> None:
 
                 residual_map(wall_fit, folder.file("residual_map.png"))
         report["outputs_units"] = model.units
+        timings = report["timings_s"]
+        timings["outputs"] = time.perf_counter() - t_outputs  # fit_report.json and model.json: ~ms
+        timings["startup"] = startup
+        timings["command"] = None if startup is None else startup + timings["total"] + timings["outputs"]
         write_json(folder.file("fit_report.json"), report)
         model.save(folder.file("model.json"))  # put in place last: its presence means the fit is complete
     msg = f"fitted {args.mesh}: ends by {report['ends_method']}, length {report['centerline_length_mm']:.1f} mm"

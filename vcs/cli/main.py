@@ -142,7 +142,7 @@ def _terminate_as_interrupt() -> None:
 
 #: C-extension modules every command may use, imported before it runs (:func:`_import_heavy_modules`).
 HEAVY_MODULES = (
-    "pyvista",
+    "vtkmodules.util.numpy_support",
     "vtkmodules.vtkCommonCore",
     "vtkmodules.vtkCommonDataModel",
     "vtkmodules.vtkFiltersCore",
@@ -160,11 +160,11 @@ HEAVY_MODULES = (
 
 
 def _import_heavy_modules(extra: Sequence[str] = ()) -> None:
-    """Import the C-extension modules the commands use (VTK's readers, writers and filters that
-    pyvista would load lazily, scipy's: :data:`HEAVY_MODULES`) and those only one command needs
-    (``extra``: a command's ``heavy_modules`` default, e.g. trimesh for `vcs wall`), so that none
-    is imported while a command runs. trimesh (with networkx and PIL, ~0.3 s) is only imported
-    by the commands that use it."""
+    """Import the C-extension modules the commands use (VTK's readers, writers and filters, scipy's:
+    :data:`HEAVY_MODULES`) and those only one command needs (``extra``: a command's
+    ``heavy_modules`` default: trimesh for `vcs wall`, pyvista for `vcs grid`), so that none is
+    imported while a command runs. trimesh (with networkx and PIL, ~0.3 s) and pyvista (~0.2 s,
+    ~35 MB) are only imported by the commands that use them."""
     import importlib
 
     for name in (*HEAVY_MODULES, *extra):

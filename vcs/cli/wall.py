@@ -169,4 +169,4 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         choices=["mm", "cm", "m"],
         help="units of the VTU points; default: the units of the fitted mesh (model.json)",
     )
-    g.set_defaults(func=cmd_grid)
+    g.set_defaults(func=cmd_grid, heavy_modules=("pyvista",))  # the grid is built and written with pyvista
