@@ -1,16 +1,30 @@
 """Benchmark: VCS build time (centerline + frame) and its lumen path search, wall fit time, whole `vcs fit`,
-to_vcs throughput.
+to_vcs throughput; and the `vcs fit` command itself on every shared real mesh: wall time, CPU time,
+peak memory and its stages.
 
-Prints a Markdown table; run with `.venv/bin/python bench/bench_vcs.py`. Meshes from
-../shared/data are used when present; an aorta phantom is always used. Each figure is given as
-wall-clock time / CPU time of this process (`time.process_time`): on a machine shared with other
-jobs the wall time grows with the load, the CPU time does not (set OPENBLAS_NUM_THREADS=1 so that
-CPU time is not spread over BLAS threads).
+Prints Markdown tables; run with `.venv/bin/python bench/bench_vcs.py` (``--fit-only``: only the
+command's table; ``--repeat N``: runs per mesh, default 3). Meshes from ../shared/data are used when
+present; an aorta phantom is always used. Each figure is given as wall-clock time / CPU time of this
+process (`time.process_time`): on a machine shared with other jobs the wall time grows with the load,
+the CPU time does not (set OPENBLAS_NUM_THREADS=1 so that CPU time is not spread over BLAS threads).
+
+The command's table runs `vcs fit` as its own process, as a user does (interpreter start-up and
+imports included), and reads the child's resource usage (``os.wait4``): wall time (median of the
+runs, and the fastest), CPU time (user + system, median) and peak resident memory (largest of the
+runs), then the stages from its fit_report.json ``timings_s`` (median). The load average is printed
+before and after: with other jobs on the machine the wall time grows, the CPU time hardly does.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
 import platform
+import shutil
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -23,6 +37,99 @@ from vcs.vessel import fit_vessel
 from vcs.wall import fit_wall
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "vessels"
+
+#: `vcs fit` options of every shared real mesh (as in tests/vcs/test_real_vessels.py); cap files relative to DATA
+FIT_CASES = {
+    "aortacfd_patient1": (
+        "aortacfd_patient1/wall_aorta.stl",
+        [
+            "--units",
+            "mm",
+            "--inlet-cap",
+            "aortacfd_patient1/inlet.stl",
+            "--outlet-cap",
+            "aortacfd_patient1/outlet4.stl",
+        ],
+    ),
+    "simvascular_open": ("simvascular_aorta_segment_open.vtp", []),
+    "simvascular_capped": ("simvascular_aorta_segment_capped.vtp", []),
+    "vmtk_closed": ("vmtk_aorta_segment_closed.stl", ["--inlet=219.0,290.0,25.0", "--outlet=221.3,146.5,21.7"]),
+    "vmtk_bifurcation": ("vmtk_aorta_bifurcation_open.stl", ["--inlet=221,177.8,21.3", "--outlet=210.2,102.9,30.8"]),
+    "vmr0154": (
+        "sphinxsys_vmr0154_aorta_capped.stl",
+        ["--units=cm", "--inlet=-0.911,4.689,3.648", "--outlet=-1.593,-0.865,0.994"],
+    ),
+    "tah_coarse": (
+        "sphinxsys_tah_aorta_capped_coarse.stl",
+        ["--units=mm", "--inlet=-23.0,-202.2,-1177.9", "--outlet=6.6,-123.6,-1246.3"],
+    ),
+}
+STAGES = ("startup", "read_and_ends", "vcs_build", "wall_fit", "self_intersection", "outputs", "command")
+
+
+def vcs_fit_command(mesh: Path, opts: list[str], out: Path) -> tuple[float, float, float, dict]:
+    """Run `vcs fit MESH -o OUT OPTS` as a child process (the venv's ``vcs`` beside this Python).
+
+    Returns
+    -------
+    wall : float, s
+    cpu : float, s
+        User + system time of the child.
+    peak_mb : float, MB
+        Its peak resident memory (``ru_maxrss``).
+    timings : dict
+        ``timings_s`` of its fit_report.json.
+    """
+    exe = Path(sys.executable).with_name("vcs")
+    cmd = [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "vcs.cli"])]
+    cmd += ["fit", str(mesh), "-o", str(out), *opts]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode() if proc.stderr else ""
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {err}")
+    timings = json.loads((out / "fit_report.json").read_text())["timings_s"]
+    peak_kb = usage.ru_maxrss  # kilobytes on Linux
+    return wall, usage.ru_utime + usage.ru_stime, peak_kb / 1024.0, timings
+
+
+def fit_command_table(repeat: int = 3) -> None:
+    """Markdown table of `vcs fit` (its own process) on every shared real mesh: wall, CPU, peak memory, stages."""
+    if not DATA.is_dir():
+        print(f"{DATA} absent: no real meshes for the `vcs fit` table")
+        return
+    cache = (
+        "off (PYTHONDONTWRITEBYTECODE: vcs's modules compiled at every start)"
+        if os.environ.get("PYTHONDONTWRITEBYTECODE")
+        else "on"
+    )
+    print(f"\n`vcs fit` as a command, {repeat} runs per mesh; bytecode cache {cache}; load before: {load()}")
+    print("| mesh | triangles | wall s (median / fastest) | CPU s | peak MB | " + " | ".join(STAGES) + " |")
+    print("|---|---|---|---|---|" + "---|" * len(STAGES))
+    tmp = Path(tempfile.mkdtemp(prefix="bench_vcs_fit_"))
+    try:
+        for name, (mesh, opts) in FIT_CASES.items():
+            opts = [str(DATA / o) if o.endswith(".stl") and not o.startswith("-") else o for o in opts]
+            runs = [vcs_fit_command(DATA / mesh, opts, tmp / name) for _ in range(repeat)]
+            n_tri = json.loads((tmp / name / "fit_report.json").read_text())["n_triangles"]
+            walls = sorted(r[0] for r in runs)
+            stages = [float(np.median([r[3].get(k) or np.nan for r in runs])) for k in STAGES]
+            print(
+                f"| {name} | {n_tri} | {np.median(walls):.2f} / {walls[0]:.2f} | {np.median([r[1] for r in runs]):.2f} "
+                f"| {max(r[2] for r in runs):.0f} | " + " | ".join(f"{v:.2f}" for v in stages) + " |"
+            )
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(f"load after: {load()}")
+
+
+def load() -> str:
+    """The 1, 5 and 15 minute load averages and the number of cores."""
+    one, five, fifteen = os.getloadavg()
+    return f"{one:.2f}, {five:.2f}, {fifteen:.2f} on {os.cpu_count()} cores"
 
 
 def best_of(fn, n=3):
@@ -71,7 +178,18 @@ def machine() -> str:
 
 
 def main():
-    print(f"machine: {machine()}; best of 3; times are wall / CPU seconds")
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p.add_argument("--fit-only", action="store_true", help="only the `vcs fit` command's table")
+    p.add_argument("--repeat", type=int, default=3, help="runs of `vcs fit` per mesh (default 3)")
+    args = p.parse_args()
+    print(f"machine: {machine()}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
+    if not args.fit_only:
+        library_table()
+    fit_command_table(args.repeat)
+
+
+def library_table():
+    print("best of 3; times are wall / CPU seconds")
     print(
         "| mesh | triangles | L | VCS build (centerline+frame) s | of which lumen path search s (wall) "
         "| wall fit K=19 R=15 s | whole `vcs fit` s |"
