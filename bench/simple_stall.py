@@ -82,7 +82,8 @@ def residual_location(case: Path) -> dict:
         with open(case / "logs" / f"log.stall.{cmd[0]}", "w") as fh:
             subprocess.run(cmd, cwd=case, env=env, stdout=fh, stderr=subprocess.STDOUT, check=True)
     t1 = _time_dirs(case)[-1][1]
-    subprocess.run(["postProcess", "-func", "writeCellCentres", "-time", t1], cwd=case, env=env, capture_output=True)
+    funcs = "(writeCellCentres writeCellVolumes)"
+    subprocess.run(["postProcess", "-funcs", funcs, "-time", t1], cwd=case, env=env, capture_output=True, check=True)
     p = np.abs(read_internal_field(case / t1 / "initialResidual:p"))
     n = len(read_internal_field(case / t1 / "V"))
     p = np.broadcast_to(p, (n,))
