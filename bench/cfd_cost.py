@@ -6,7 +6,7 @@ patient1 at its default ``auto`` cell size, not the sheet's 1.0 mm, plus the Sim
 segment and the vmtk bifurcation) and, with ``--demo N``, the first N demo aortas, through the
 whole workflow with config/config.yaml; then one row per patient.
 
-    .venv/bin/python bench/cfd_cost.py [-d DIR] [--cores 2] [--demo 8]
+    .venv/bin/python bench/cfd_cost.py [-d DIR] [--cores 2] [--demo 8] [--skip id,id]
 
 DIR (default: a temporary folder) is the Snakemake working directory; a finished DIR is only
 re-read. Per patient: cells, the CFD verdict (criterion; for a time average its window in
@@ -88,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-d", "--workdir", type=Path, help="Snakemake working directory (default: temporary)")
     ap.add_argument("--cores", type=int, default=2, help="cores for Snakemake (default 2)")
     ap.add_argument("--demo", type=int, default=0, help="also the first N demo aortas (default 0)")
+    ap.add_argument("--skip", default="", help="comma-separated patient ids to leave out")
     a = ap.parse_args(argv)
     if not (REPO.parent / "shared" / "data").is_dir():
         print(f"cfd_cost: error: {REPO.parent / 'shared' / 'data'} is absent", file=sys.stderr)
@@ -95,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         wd = (a.workdir or Path(tmp)).resolve()
         wd.mkdir(parents=True, exist_ok=True)
-        ids = write_rows(wd / "patients.tsv", sheet_rows(a.demo))
+        skip = set(filter(None, a.skip.split(",")))
+        ids = write_rows(wd / "patients.tsv", [r for r in sheet_rows(a.demo) if r["id"] not in skip])
         run_workflow(wd, ["config.yaml"], "patients.tsv", a.cores, "shared real vessels, default config")
         res = wd / "results"
         print(
