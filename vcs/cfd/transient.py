@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,21 @@ END_PLANE_CELLS = 1.5
 
 CHECK_EVERY_S = 15.0
 """Wall-clock seconds between two looks of :class:`AverageWatch` at the window's records."""
+
+
+@dataclass
+class _Pimple:
+    """What every pimpleFoam stage of one transient solve shares: the case, its description, the
+    runner, the MPI ranks, the folder holding the time folders (the case or processor0), the
+    stages' template settings and the ``status["transient"]`` dict being filled."""
+
+    case_dir: Path
+    state: dict[str, Any]
+    run: _Runner
+    ranks: int
+    root: Path
+    common: dict[str, Any]
+    tr: dict[str, Any]
 
 
 def _round_up(x: float, digits: int = 3) -> float:
@@ -154,8 +170,9 @@ def transient_fallback(
             common["delta_t"] = _fmt_time(min(cour["delta_t_expected_s"], plan["max_delta_t_s"]))
         peak = float(prof["peak_velocity"])
         common["probe_points"] = cour["probe_points"]
-        plan = _run_washout(case_dir, state, run, ranks, plan, common, tr, root)
-        end = _run_window(case_dir, state, run, ranks, plan, common, tr, root, peak)
+        solve = _Pimple(case_dir, state, run, ranks, root, common, tr)
+        plan = _run_washout(solve, plan)
+        end = _run_window(solve, plan, peak)
         verdict = window_statistics(case_dir, state, plan["averaging_start_time"], end[0], peak)
         _log_verdict(verdict)
         _record_verdict(case_dir, state, status, tr, plan, verdict, simple_reason)
@@ -332,35 +349,23 @@ def courant_plan(
     return out
 
 
-def _run_stage(
-    case_dir: Path,
-    state: dict[str, Any],
-    run: _Runner,
-    ranks: int,
-    name: str,
-    end: float,
-    common: dict[str, Any],
-    tr: dict[str, Any],
-    root: Path,
-    watch: Any,
-    *,
-    average: bool,
-) -> dict[str, Any]:
+def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bool) -> dict[str, Any]:
     """One pimpleFoam stage (``washout`` or ``average``) from the latest time to ``end`` (or until
     ``watch`` stops it), writing only at its end; its time steps, time step range and Courant
     number merged into ``tr``. Returns the parsed log; raises :class:`Stop` when it fails."""
+    case_dir, tr = solve.case_dir, solve.tr
     render_files(
         case_dir,
-        state,
+        solve.state,
         STAGE_FILES,
         end_time=_fmt_time(end),
-        write_interval=_fmt_time(end - _time_dirs(root)[-1][0]),
+        write_interval=_fmt_time(end - _time_dirs(solve.root)[-1][0]),
         average=average,
         monitors=True,
-        **common,
+        **solve.common,
     )
     log = f"pimpleFoam.{name}"
-    r = run(["pimpleFoam"], log, ranks, watch=watch)
+    r = solve.run(["pimpleFoam"], log, solve.ranks, watch=watch)
     parsed = parse_solver_log(case_dir / "logs" / f"log.{log}")
     tr.setdefault("time_steps", {})[name] = len(parsed["rows"])
     dt = tr.get("delta_t_s") or {}
@@ -374,26 +379,16 @@ def _run_stage(
     return parsed
 
 
-def _run_washout(
-    case_dir: Path,
-    state: dict[str, Any],
-    run: _Runner,
-    ranks: int,
-    plan: dict[str, Any],
-    common: dict[str, Any],
-    tr: dict[str, Any],
-    root: Path,
-) -> dict[str, Any]:
+def _run_washout(solve: _Pimple, plan: dict[str, Any]) -> dict[str, Any]:
     """The wash-out: pimpleFoam from the SIMPLE state, ended by :class:`WashoutWatch` once the
     start-up transient is over (at least ``min_washout_flow_throughs``, at most
     ``washout_flow_throughs``). Returns the plan with the window moved to start where the
     wash-out ended (``washout_s``, ``averaging_start_time``, ``min_end_time``, ``max_end_time``)."""
     if plan["washout_s"] <= 0:
         return plan
-    watch = WashoutWatch(case_dir, state, plan)
-    _run_stage(case_dir, state, run, ranks, "washout", plan["averaging_start_time"], common, tr, root, watch,
-               average=False)  # fmt: skip
-    end = _time_dirs(root)[-1]
+    watch = WashoutWatch(solve.case_dir, solve.state, plan)
+    _run_stage(solve, "washout", plan["averaging_start_time"], watch, average=False)
+    end = _time_dirs(solve.root)[-1]
     if end[0] <= plan["start_time"]:
         raise Stop("the wash-out wrote no time folder", "pimpleFoam.washout")
     washout = end[0] - plan["start_time"]
@@ -405,34 +400,24 @@ def _run_washout(
         "min_end_time": end[0] + plan["min_window_s"],
         "max_end_time": end[0] + plan["max_window_s"],
     }
-    tr.update(moved)
-    tr["washout"] = watch.report()
+    solve.tr.update(moved)
+    solve.tr["washout"] = watch.report()
     return moved
 
 
-def _run_window(
-    case_dir: Path,
-    state: dict[str, Any],
-    run: _Runner,
-    ranks: int,
-    plan: dict[str, Any],
-    common: dict[str, Any],
-    tr: dict[str, Any],
-    root: Path,
-    peak_velocity: float,
-) -> tuple[float, str]:
+def _run_window(solve: _Pimple, plan: dict[str, Any], peak_velocity: float) -> tuple[float, str]:
     """The averaging window (fieldAverage; the records judged while it runs by
     :class:`AverageWatch`, the means written at its end). Returns the end's time folder (solver
     time, name); raises :class:`Stop` when the stage fails or ends off the plan."""
-    watch = AverageWatch(case_dir, state, plan, peak_velocity)
-    parsed = _run_stage(case_dir, state, run, ranks, "average", plan["max_end_time"], common, tr, root, watch,
-                        average=True)  # fmt: skip
+    case_dir, tr = solve.case_dir, solve.tr
+    watch = AverageWatch(case_dir, solve.state, plan, peak_velocity)
+    parsed = _run_stage(solve, "average", plan["max_end_time"], watch, average=True)
     tr["solver_log"] = _log_summary(parsed, case_dir / "logs" / "log.pimpleFoam.average")
     if parsed["rows"]:
         tr["final_residuals"] = {k: parsed["rows"][-1][k] for k in ("p", "U") if k in parsed["rows"][-1]}
     if watch.stopped_at is not None:
         tr["ended_early_at"] = watch.stopped_at
-    written = [t for t in _time_dirs(root) if t[0] > plan["averaging_start_time"] + 1e-9]
+    written = [t for t in _time_dirs(solve.root) if t[0] > plan["averaging_start_time"] + 1e-9]
     if not written:
         raise Stop("the averaging stage wrote no time folder", "pimpleFoam.average")
     end_dir = written[-1]
@@ -442,7 +427,7 @@ def _run_window(
             f"{_fmt_time(plan['min_end_time'])}",
             "pimpleFoam.average",
         )
-    if ranks > 1 and run(["reconstructPar", "-time", end_dir[1]], "reconstructPar").returncode != 0:
+    if solve.ranks > 1 and solve.run(["reconstructPar", "-time", end_dir[1]], "reconstructPar").returncode != 0:
         raise Stop("reconstructPar failed", "reconstructPar")
     tr["end_time"] = end_dir[0]
     tr["end_time_folder"] = end_dir[1]
