@@ -9,46 +9,16 @@ Public API (all lengths in mm)::
     model.save("model.json"); VesselModel.load("model.json")
 """
 
-from __future__ import annotations
-
-import importlib
-from typing import TYPE_CHECKING, Any
-
-# Public name -> the module that defines it. Imported on first use (PEP 562), so that `import
-# vcs.cfd` or `import vcs.errors` does not load the whole geometry stack (scipy.interpolate,
-# trimesh, ...): every workflow job imports a submodule of vcs, and the interpreter's start-up is
-# the larger part of a short job's time (bench/overhead.py).
-_EXPORTS = {
-    "Ends": "vcs.ends",
-    "find_ends": "vcs.ends",
-    "VCSInputError": "vcs.errors",
-    "MeasurementGrid": "vcs.grid",
-    "measurement_grid": "vcs.grid",
-    "Surface": "vcs.io",
-    "read_surface": "vcs.io",
-    "VesselCoordinateSystem": "vcs.model",
-    "make_phantom": "vcs.phantoms.factory",
-    "Phantom": "vcs.phantoms.sweep",
-    "WallMesh": "vcs.surface",
-    "wall_mesh": "vcs.surface",
-    "VesselModel": "vcs.vessel",
-    "fit_vessel": "vcs.vessel",
-    "WallFit": "vcs.wall",
-    "WallModel": "vcs.wall",
-    "fit_wall": "vcs.wall",
-}
-
-if TYPE_CHECKING:  # the names as type checkers and the import graph (tests/vcs/test_layout.py) see them
-    from vcs.ends import Ends, find_ends
-    from vcs.errors import VCSInputError
-    from vcs.grid import MeasurementGrid, measurement_grid
-    from vcs.io import Surface, read_surface
-    from vcs.model import VesselCoordinateSystem
-    from vcs.phantoms.factory import make_phantom
-    from vcs.phantoms.sweep import Phantom
-    from vcs.surface import WallMesh, wall_mesh
-    from vcs.vessel import VesselModel, fit_vessel
-    from vcs.wall import WallFit, WallModel, fit_wall
+from vcs.ends import Ends, find_ends
+from vcs.errors import VCSInputError
+from vcs.grid import MeasurementGrid, measurement_grid
+from vcs.io import Surface, read_surface
+from vcs.model import VesselCoordinateSystem
+from vcs.phantoms.factory import make_phantom
+from vcs.phantoms.sweep import Phantom
+from vcs.surface import WallMesh, wall_mesh
+from vcs.vessel import VesselModel, fit_vessel
+from vcs.wall import WallFit, WallModel, fit_wall
 
 __all__ = [
     "Ends",
@@ -69,17 +39,3 @@ __all__ = [
     "read_surface",
     "wall_mesh",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    """A public name of :data:`__all__`, imported from its module on first use."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'vcs' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
