@@ -4,7 +4,9 @@ Runs the workflow with the local profile in a scratch directory outside the repo
 a new temporary one), then reads Snakemake's ``benchmark:`` files (results/benchmarks/<rule>/*.tsv,
 the ``s`` column: wall time of the job's process) and each case's status.json ``timings_s`` (the
 OpenFOAM utilities: blockMesh, snappyHexMesh, checkMesh, simpleFoam, ...), and prints per rule the
-jobs, their wall time, the time inside OpenFOAM and the share outside it, then the whole run.
+jobs, their wall time, the time inside OpenFOAM and the share outside it, the longest job and the
+largest peak memory (max_rss: what profiles/slurm's per-rule resources are sized from), then the
+whole run.
 
     .venv/bin/python bench/overhead.py                              # the demo (config/config.yaml)
     .venv/bin/python bench/overhead.py --configfile config/ci.yaml  # 3 CI-sized patients
@@ -34,14 +36,16 @@ REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = Path(sys.executable).parent / "snakemake"
 
 
-def read_benchmarks(results: Path) -> dict[str, dict[str, float]]:
-    """{rule: {job: seconds}} from results/benchmarks/<rule>/<job>.tsv (the last row's ``s``)."""
+def read_benchmarks(results: Path, column: str = "s") -> dict[str, dict[str, float]]:
+    """{rule: {job: value}} from results/benchmarks/<rule>/<job>.tsv (the last row's ``column``:
+    ``s`` wall-clock seconds, ``max_rss`` peak memory MB, ...)."""
     out: dict[str, dict[str, float]] = {}
     for tsv in sorted((results / "benchmarks").glob("*/*.tsv")):
         with open(tsv) as fh:
             rows = list(csv.DictReader(fh, delimiter="\t"))
         if rows:
-            out.setdefault(tsv.parent.name, {})[tsv.stem] = float(rows[-1]["s"])
+            value = rows[-1].get(column, "NA")
+            out.setdefault(tsv.parent.name, {})[tsv.stem] = float(value) if value not in ("", "NA", "-") else 0.0
     return out
 
 
@@ -60,26 +64,31 @@ SOLVE_RULES = ("openfoam_solve",)
 
 
 def table(results: Path) -> tuple[list[tuple], float, float]:
-    """Rows (rule, jobs, wall s, OpenFOAM s, outside s, outside share), the job total and the
-    OpenFOAM total."""
+    """Rows (rule, jobs, wall s, OpenFOAM s, outside s, outside share, longest job s, peak MB),
+    the job total and the OpenFOAM total."""
     bench = read_benchmarks(results)
+    rss = read_benchmarks(results, "max_rss")
     foam = openfoam_seconds(results)
     rows = []
     for rule, jobs in sorted(bench.items(), key=lambda kv: -sum(kv[1].values())):
         wall = sum(jobs.values())
         inside = sum(foam.get(job, 0.0) for job in jobs) if rule in SOLVE_RULES else 0.0
-        rows.append((rule, len(jobs), wall, inside, wall - inside, (wall - inside) / wall if wall else 0.0))
+        share = (wall - inside) / wall if wall else 0.0
+        rows.append((rule, len(jobs), wall, inside, wall - inside, share, max(jobs.values()), max(rss[rule].values())))
     total = sum(r[2] for r in rows)
     inside = sum(r[3] for r in rows)
     return rows, total, inside
 
 
 def print_table(results: Path) -> None:
+    """The per-rule table; the last two columns (the longest job, the largest peak memory) are what
+    profiles/slurm's per-rule runtime and mem_mb are sized from."""
     rows, total, inside = table(results)
-    head = ("jobs", "wall s", "OpenFOAM s", "outside s", "per job", "outside")
-    print(f"{'rule':16s} " + " ".join(f"{h:>{w}s}" for h, w in zip(head, (4, 8, 10, 9, 7, 7))))
-    for rule, n, wall, foam, out, share in rows:
-        print(f"{rule:16s} {n:4d} {wall:8.1f} {foam:10.1f} {out:9.1f} {out / n:7.2f} {share:7.1%}")
+    head = ("jobs", "wall s", "OpenFOAM s", "outside s", "per job", "outside", "max s", "max MB")
+    print(f"{'rule':16s} " + " ".join(f"{h:>{w}s}" for h, w in zip(head, (4, 8, 10, 9, 7, 7, 7, 7))))
+    for rule, n, wall, foam, out, share, longest, peak in rows:
+        print(f"{rule:16s} {n:4d} {wall:8.1f} {foam:10.1f} {out:9.1f} {out / n:7.2f} {share:7.1%}", end=" ")
+        print(f"{longest:7.1f} {peak:7.0f}")
     if total:
         print(
             f"{'all jobs':16s} {sum(r[1] for r in rows):4d} {total:8.1f} {inside:10.1f} {total - inside:9.1f}"
@@ -119,7 +128,7 @@ def main(argv=None) -> int:
     ]  # fmt: skip
     env = {**os.environ, "WM_PROJECT_DIR": os.environ.get("WM_PROJECT_DIR", "/usr/share/openfoam")}
     log = work / "snakemake.log"
-    with open(log, "w") as fh:  # the phantoms first (targets before the options: --quiet takes values)
+    with open(log, "w") as fh:  # the phantoms first: the timed run is the chains and the atlas
         subprocess.run([str(SNAKEMAKE), "--until", "vcs_phantom", *base], cwd=work, env=env, stdout=fh, stderr=fh)
         print(f"{datetime.datetime.now().isoformat(timespec='seconds')}  {load()}")
         t0 = time.perf_counter()
@@ -127,8 +136,10 @@ def main(argv=None) -> int:
         wall = time.perf_counter() - t0
     print(f"{datetime.datetime.now().isoformat(timespec='seconds')}  {load()}")
     commit = subprocess.run(["git", "-C", str(REPO), "describe", "--always", "--dirty"], capture_output=True, text=True)
-    print(f"workflow at {commit.stdout.strip()}, config {' + '.join(p.name for p in configs)}, sheet {sheet.name}, "
-          f"{args.cores} cores, in {work}; snakemake exit {r.returncode}, {wall:.0f} s (log: {log})")  # fmt: skip
+    where = commit.stdout.strip() or REPO
+    configs_text = " + ".join(p.name for p in configs)
+    print(f"workflow at {where}, config {configs_text}, sheet {sheet.name}, {args.cores} cores, in {work}")
+    print(f"snakemake exit {r.returncode}, {wall:.0f} s (log: {log})")
     print_table(work / "results")
     return r.returncode
 
