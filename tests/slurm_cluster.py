@@ -24,6 +24,8 @@ Usage::
     from slurm_cluster import running_cluster
     with running_cluster(tmp_path) as cluster:
         subprocess.run(["sbatch", "--wrap", "hostname"], env=cluster.env)
+        # Snakemake: the shipped profiles/slurm with this cluster's overrides
+        profile = cluster.snakemake_profile(tmp_path / "profile")  # --profile <profile>
 
 or, in pytest, the session-scoped fixture ``slurm_cluster`` (yields the
 SlurmCluster; pass ``env=slurm_cluster.env`` to subprocesses). Import it into
@@ -69,16 +71,17 @@ MARKER = "vcs-slurm-"
 
 REQUIRED_BINARIES = ("slurmctld", "slurmd", "munged", "sbatch", "squeue", "sinfo", "scontrol", "srun")
 
-# Plugin options that make snakemake-executor-plugin-slurm 2.8.0 work with this
-# accounting-free cluster (sacct does not work without slurmdbd; status must come
-# from squeue, which needs MinJobAge >= 3 * init-seconds-before-status-checks).
-SNAKEMAKE_SLURM_ARGS = (
-    "--slurm-status-command",
-    "squeue",
-    "--slurm-no-account",
-    "--slurm-init-seconds-before-status-checks",
-    "2",
-)
+# What this throw-away cluster needs beyond profiles/slurm (which is for a real cluster), for
+# snakemake-executor-plugin-slurm 2.8.0: no accounting (sacct fails without slurmdbd, so status
+# comes from squeue, which needs MinJobAge >= 3 * init-seconds-before-status-checks: 300 >= 6), no
+# accounts (submit without -A; validating an account via sacctmgr would fail), and its one
+# partition (merged into the profile's default-resources by SlurmCluster.snakemake_profile).
+TEST_PROFILE_OVERRIDES = {
+    "slurm-status-command": "squeue",
+    "slurm-no-account": True,
+    "slurm-init-seconds-before-status-checks": 2,
+}
+REPO = Path(__file__).resolve().parents[1]
 
 
 class SlurmClusterError(RuntimeError):
@@ -107,6 +110,19 @@ class SlurmCluster:
     def run(self, *args: str, timeout: float = 30, check: bool = True) -> subprocess.CompletedProcess:
         """Run a slurm client command against this cluster."""
         return subprocess.run(list(args), env=self.env, capture_output=True, text=True, timeout=timeout, check=check)
+
+    def snakemake_profile(self, dest: Path, base: Path = REPO / "profiles" / "slurm") -> Path:
+        """A Snakemake profile for this cluster in ``dest``: the shipped ``base`` profile (groups,
+        per-rule resources, ...) with :data:`TEST_PROFILE_OVERRIDES` and this cluster's partition.
+        Returns the profile folder (for ``--profile``)."""
+        import yaml
+
+        profile = yaml.safe_load((Path(base) / "config.yaml").read_text())
+        profile.update(TEST_PROFILE_OVERRIDES)
+        profile["default-resources"] = {**profile.get("default-resources", {}), "slurm_partition": self.partition}
+        dest.mkdir(parents=True, exist_ok=True)
+        (dest / "config.yaml").write_text(yaml.safe_dump(profile, sort_keys=False))
+        return dest
 
     def log_tails(self, n: int = 30) -> str:
         out = []

@@ -6,11 +6,13 @@ No OpenFOAM or VCS code runs: the outputs of a finished run are faked (empty fil
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from conftest import parse_jobs
 
 PER_PATIENT = ["vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample"]
 IDS = ["P1", "P2", "P3"]
@@ -228,6 +230,47 @@ def test_default_config_is_the_eight_phantom_demo(repo):
         if ln.split()[:1] and ln.split()[0] in ("vcs_phantom", "vcs_fit", "openfoam_solve", "atlas_build")
     )
     assert counts == {"vcs_phantom": "8", "vcs_fit": "8", "openfoam_solve": "8", "atlas_build": "1"}
+
+
+# ------------------------------------------------------------------ cohort scale on SLURM
+
+_TOP_LEVEL = re.compile(r"^\[[^\]]+\]\s*$|^\[[^\]]+\] Group job (\w+) \(jobs in lexicogr\. order\):$", re.M)
+
+
+def slurm_submissions(text: str) -> list[tuple[str | None, set]]:
+    """The jobs a dry-run with profiles/slurm would submit: [(group or None, {(rule, id)})], one
+    per top-level entry of the plan (a group job with its member jobs, or a single job)."""
+    starts = list(_TOP_LEVEL.finditer(text))
+    entries = []
+    for m, nxt in zip(starts, [*starts[1:], None]):
+        body = text[m.end() : nxt.start() if nxt else len(text)]
+        if m.group(1):  # a group's member jobs are printed indented by 4
+            body = re.sub(r"^ {4}", "", body, flags=re.M)
+        entries.append((m.group(1), parse_jobs(body)))
+    return entries
+
+
+def test_a_thousand_patients_on_slurm_are_one_job_each_and_the_atlas(tmp_path, workdir_factory, repo):
+    """profiles/slurm groups each patient's chain into one SLURM job: a 1,000-patient sheet of
+    demo rows plans 6,003 jobs (phantom + 5 per patient, atlas, verdict, `all`) and submits 1,001:
+    one per patient holding exactly that patient's six jobs, and the atlas (atlas_complete and
+    `all` run in Snakemake itself). A dry-run: nothing is submitted. (bench/slurm_plan.py prints
+    how long the plan takes.)"""
+    n = 1000
+    wd = workdir_factory(
+        tmp_path, [{"id": f"P{i}", "mesh": f"results/demo/aorta_seed{i}.stl", "units": "mm"} for i in range(n)]
+    )
+    r = wd.snakemake("-n", "--profile", str(repo / "profiles" / "slurm"), timeout=1800)
+    text = r.stdout + r.stderr
+    assert re.search(r"^total\s+6003$", text, re.M), text[-3000:]
+    plan = slurm_submissions(text)
+    singles = sorted(rule for group, jobs in plan if group is None for rule, _ in jobs)
+    assert singles == ["all", "atlas_build", "atlas_complete"], singles
+    groups = [frozenset(jobs) for group, jobs in plan if group is not None]
+    assert {group for group, _ in plan} == {"patient", None}
+    chains = {frozenset(chain(PER_PATIENT, [f"P{i}"]) | {("vcs_phantom", f"aorta_seed{i}")}) for i in range(n)}
+    assert len(groups) == n and set(groups) == chains
+    assert len(groups) + singles.count("atlas_build") == n + 1  # SLURM jobs
 
 
 # ------------------------------------------------------------------ one-line errors

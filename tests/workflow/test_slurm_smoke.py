@@ -2,8 +2,9 @@
 
 Starts slurmctld/slurmd/munged (tests/slurm_cluster.py, needs root and the
 Debian packages slurm-wlm + munge, skipped otherwise), runs a plain
-`sbatch --wrap` job, then a tiny two-job Snakefile through
-`snakemake --profile profiles/slurm` and checks that both jobs ran as
+`sbatch --wrap` job, then a tiny two-job Snakefile through the shipped
+profiles/slurm with the test cluster's overrides
+(`SlurmCluster.snakemake_profile`) and checks that both jobs ran as
 distinct SLURM jobs.
 """
 
@@ -17,13 +18,12 @@ from pathlib import Path
 import pytest
 
 TESTS_DIR = Path(__file__).resolve().parents[1]
-REPO = TESTS_DIR.parent
 if str(TESTS_DIR) not in sys.path:
     sys.path.insert(0, str(TESTS_DIR))
 
 # The session fixture is reference counted in slurm_cluster, so importing it here
 # as well as in a conftest.py starts only one cluster.
-from slurm_cluster import SNAKEMAKE_SLURM_ARGS, slurm_cluster  # noqa: E402,F401
+from slurm_cluster import slurm_cluster  # noqa: E402,F401
 
 pytestmark = pytest.mark.slurm
 
@@ -88,17 +88,12 @@ def test_snakemake_slurm_executor(slurm_cluster, tmp_path):  # noqa: F811
         pytest.skip(slurm_cluster.nested_srun_problem)
     (tmp_path / "Snakefile").write_text(SNAKEFILE)
     cmd = _snakemake_exe() + [
-        "--profile",
-        str(REPO / "profiles" / "slurm"),
+        "--profile",  # profiles/slurm with the test cluster's partition, squeue status, no account
+        str(slurm_cluster.snakemake_profile(tmp_path / "profile")),
         "--snakefile",
         str(tmp_path / "Snakefile"),
         "--directory",
         str(tmp_path),
-        # cluster-specific overrides (also set in the profile, repeated so this
-        # test does not depend on the profile's test-cluster defaults):
-        *SNAKEMAKE_SLURM_ARGS,
-        "--set-resources",
-        f"write_jobid:slurm_partition={slurm_cluster.partition}",
         "--latency-wait",
         "5",
         "--retries",

@@ -5,20 +5,23 @@ config/config.yaml, the sheet of config/ci_patients.tsv); three because vcs.atla
 atlas of fewer than 3 included patients -- runs twice from scratch in separate throw-away
 working directories:
 
-* through ``--profile profiles/slurm`` against the test cluster of tests/slurm_cluster.py
-  (every job -- phantom, fit, wall, case, solve, sampling, atlas -- is an sbatch job), and
+* through the shipped ``profiles/slurm`` with the test cluster's overrides
+  (``SlurmCluster.snakemake_profile``: partition, squeue status, no account) against the test
+  cluster of tests/slurm_cluster.py: each patient's chain (phantom, fit, wall, case, solve,
+  sampling) is ONE sbatch job (the profile's ``groups``), the atlas one more, and
 * through ``--profile profiles/local`` on this machine.
 
-Checks that every job of the DAG went through sbatch as its own SLURM job (Snakemake's
-per-job SLURM log ``.snakemake/slurm_logs/rule_<rule>/<wildcards>/<jobid>.log``, and the job id
-completed with exit status 0 in slurmctld's log), that the solve jobs got cfd.ranks CPUs, and
+Checks that the SLURM run submitted exactly one job per patient plus the atlas, that each
+patient's job ran exactly that patient's jobs of the DAG (read from the job's own log, the inner
+Snakemake's ``rule ...:`` / ``wildcards:`` lines) and completed with exit status 0 in
+slurmctld's log, that the jobs got cfd.ranks CPUs, and
 that the results are the same as the local run's: byte-identical model.json, status.json with
 the same cells/iterations, bit-identical resampled fields (np.array_equal on every array of
 fields.npz except the sampler's wall-clock timings *_time_s: serial simpleFoam and the rest of
 the chain are deterministic) and an identical atlas.json (patient lists, scores, regression).
 
 Needs root, slurm-wlm + munge (else the ``slurm_cluster`` fixture skips) and OpenFOAM.
-About 3 minutes on 2 cores (local run ~35 s, SLURM run ~140 s: 19 sbatch jobs).
+4 sbatch jobs (one per patient, the atlas); 17 min with the smoke tests at load 8-10 (2026-12-02).
 """
 
 from __future__ import annotations
@@ -31,9 +34,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
-from conftest import ci_workdir
-from slurm_cluster import SNAKEMAKE_SLURM_ARGS, missing_requirements
+from conftest import ci_workdir, parse_jobs
+from slurm_cluster import missing_requirements
 
 HAVE_FOAM = shutil.which("simpleFoam") is not None
 SLURM_MISSING = missing_requirements()
@@ -48,32 +50,23 @@ pytestmark = [
 ]
 
 
-def _slurm_jobs(wd) -> dict[tuple[str, str], list[str]]:
-    """{(rule, wildcards string): [SLURM job ids]} from the plugin's per-job log files
-    .snakemake/slurm_logs/rule_<rule>/<wildcards joined by _>/<jobid>.log (no wildcards: no
-    middle folder)."""
-    jobs: dict[tuple[str, str], list[str]] = {}
-    root = wd.path / ".snakemake" / "slurm_logs"
-    for log in root.rglob("*.log"):
-        rule_dir, *wc = log.relative_to(root).parent.parts
-        jobs.setdefault((rule_dir.removeprefix("rule_"), "/".join(wc)), []).append(log.stem)
-    return jobs
+_SUBMITTED = re.compile(r"Job \S+ has been submitted with SLURM jobid (\d+) \(log: (\S+)\)")
+# rules that never go to SLURM: a target without a body, a localrule (runs in this Snakemake)
+LOCAL_RULES = ("all", "atlas_complete")
+_RULE_LINE = re.compile(r"^\s+((?:local)?rule \w+:\s*)$", re.M)
 
 
-_SUBMITTED = re.compile(r"Job \d+ has been submitted with SLURM jobid (\d+) \(log: (\S+)\)")
-
-
-def _planned(wd) -> set[tuple[str, str]]:
-    """(rule, wildcards string as the plugin names its log dir) of every job of a dry-run."""
-    out = set()
+def _expected_jobs(wd) -> dict[str, set[tuple[str, str | None]]]:
+    """{SLURM job: {(rule, id)}} expected from a dry-run of the DAG without groups (the local
+    profile): one job per patient holding its phantom (aorta_seed<N> of demo_aorta_<N>) and its
+    chain, and one for the atlas."""
+    expected: dict[str, set[tuple[str, str | None]]] = {}
     for rule, pid in wd.planned_jobs("--forceall"):
-        if rule in ("all", "atlas_complete"):  # a target without a body; a localrule (runs in this Snakemake)
+        if rule in LOCAL_RULES:
             continue
-        if rule == "vcs_phantom":  # planned_jobs gives "aorta_seed0", the plugin "aorta_0"
-            kind, seed = pid.split("_seed")
-            pid = f"{kind}_{seed}"
-        out.add((rule, pid or ""))
-    return out
+        owner = f"demo_aorta_{pid.removeprefix('aorta_seed')}" if rule == "vcs_phantom" else pid or rule
+        expected.setdefault(owner, set()).add((rule, pid))
+    return expected
 
 
 def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, repo, slurm_cluster):
@@ -88,16 +81,14 @@ def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, rep
     t_local = time.monotonic() - t0
 
     # ---- the same on SLURM (every job through sbatch)
-    profile = yaml.safe_load((repo / "profiles" / "slurm" / "config.yaml").read_text())
-    assert profile["default-resources"]["slurm_partition"] == slurm_cluster.partition
     slurm = ci_workdir(tmp_path / "slurm", SEEDS)
     assert slurm.config()["cfd"]["ranks"] == ranks
-    expected = _planned(slurm)
-    assert len(expected) == 5 * len(IDS) + len(SEEDS) + 1, expected  # 5 per patient, phantoms, atlas
+    expected = _expected_jobs(slurm)
+    assert sorted(expected) == sorted([*IDS, "atlas_build"]), expected
+    assert all(len(expected[pid]) == 6 for pid in IDS), expected  # phantom + 5 rules per patient
     r = slurm.snakemake(
-        "--profile",
-        str(repo / "profiles" / "slurm"),
-        *SNAKEMAKE_SLURM_ARGS,  # no --set/--default-resources: they would replace the profile's
+        "--profile",  # the shipped profiles/slurm with the test cluster's partition, status, account
+        str(slurm_cluster.snakemake_profile(tmp_path / "profile")),
         "--latency-wait",
         "5",
         "--retries",
@@ -113,37 +104,36 @@ def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, rep
         f"SLURM run failed ({t_slurm:.0f} s):\n{r.stdout[-4000:]}\n{r.stderr[-6000:]}\n" + slurm_cluster.log_tails()
     )
 
-    # ---- (1) every job was its own sbatch job that completed
-    jobs = _slurm_jobs(slurm)
-    assert set(jobs) == expected, (sorted(jobs), sorted(expected))
-    assert all(len(ids) == 1 for ids in jobs.values()), jobs  # --retries 0: one submission each
-    job_ids = [ids[0] for ids in jobs.values()]
-    assert all(j.isdigit() for j in job_ids) and len(set(job_ids)) == len(job_ids), jobs
-    # ... as reported by the submitting Snakemake ("Job 3 has been submitted with SLURM jobid 1
-    # (log: .../rule_vcs_phantom/aorta_0/1.log)") and completed with exit status 0 per slurmctld
-    submitted = {Path(log): jid for jid, log in _SUBMITTED.findall(r.stdout + r.stderr)}
-    root = slurm.path / ".snakemake" / "slurm_logs"
-    assert submitted == {root / f"rule_{rule}" / wc / f"{jid}.log": jid for (rule, wc), (jid,) in jobs.items()}, (
-        submitted,
-        jobs,
-    )
+    # ---- (1) one SLURM job per patient (its whole chain) and one for the atlas, each completed
+    # as reported by the submitting Snakemake ("Job <uuid> has been submitted with SLURM jobid 1 (log:
+    # .../group_patient_.../1.log)"); --retries 0: one submission each
+    submitted = {jid: Path(log) for jid, log in _SUBMITTED.findall(r.stdout + r.stderr)}
+    assert len(submitted) == len(IDS) + 1, submitted
+    ran: dict[str, str] = {}  # owner (patient id or atlas_build) -> SLURM job id
+    for jid, log in submitted.items():
+        # the job's own log is the inner (jobstep) Snakemake running exactly its jobs of the DAG
+        text = log.read_text(errors="replace")
+        text = _RULE_LINE.sub(r"\1", text)  # a group's jobs may be printed indented
+        jobs = {job for job in parse_jobs(text) if job[0] not in LOCAL_RULES}
+        owners = [owner for owner, want in expected.items() if want == jobs]
+        assert len(owners) == 1 and owners[0] not in ran, (jid, sorted(jobs), ran)
+        ran[owners[0]] = jid
+    assert sorted(ran) == sorted(expected), (ran, submitted)
+    for pid in IDS:  # the plugin names a group job's log folder after the group
+        assert submitted[ran[pid]].parent.name.startswith("group_patient"), submitted
     ctld_log = (slurm_cluster.workdir / "slurmctld.log").read_text(errors="replace")
-    for jid in job_ids:
+    for jid in submitted:
         assert re.search(rf"_job_complete: JobId={jid} WEXITSTATUS 0\b", ctld_log), (
             f"job {jid} not completed in slurmctld.log"
         )
-    # the job's own log is the inner (jobstep) Snakemake running exactly that rule
-    for (rule, wc), (jid,) in jobs.items():
-        text = (root / f"rule_{rule}" / wc / f"{jid}.log").read_text(errors="replace")
-        assert f"--target-jobs {rule}:" in text and re.search(rf"^rule {rule}:$", text, re.M), (rule, wc, text[-2000:])
-    # CPUs of the solve jobs = cfd.ranks (profile: cpus_per_task = threads = cfd.ranks); only
-    # visible while slurmctld still keeps the finished job (MinJobAge 300 s)
-    visible = slurm_cluster.run("squeue", "--states=all", "-h", "-o", "%i|%C|%k", check=False).stdout
-    cpus = {line.split("|")[0]: line.split("|") for line in visible.splitlines() if line.count("|") == 2}
+    # CPUs of the patients' jobs = cfd.ranks (profile: cpus_per_task = threads = cfd.ranks for the
+    # solve, 1 for the rest; a group job asks for the most); only visible while slurmctld still
+    # keeps the finished job (MinJobAge 300 s)
+    visible = slurm_cluster.run("squeue", "--states=all", "-h", "-o", "%i|%C", check=False).stdout
+    cpus = dict(line.split("|") for line in visible.splitlines() if line.count("|") == 1)
     for pid in IDS:
-        (jid,) = jobs[("openfoam_solve", pid)]
-        if jid in cpus:
-            assert int(cpus[jid][1]) == ranks and cpus[jid][2] == f"rule_openfoam_solve_wildcards_{pid}", cpus[jid]
+        if ran[pid] in cpus:
+            assert int(cpus[ran[pid]]) == ranks, (pid, cpus[ran[pid]])
 
     # ---- (2) identical results
     for pid in IDS:
@@ -166,4 +156,4 @@ def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, rep
     assert sorted(atlas_a["patients_included"]) == sorted(atlas_b["patients_included"]) == IDS
     assert atlas_a["patients_excluded"] == atlas_b["patients_excluded"] == []
     assert atlas_a == atlas_b  # PCA scores, regression, ... too (atlas.json holds no timings or paths)
-    print(f"local run {t_local:.0f} s, SLURM run {t_slurm:.0f} s, {len(job_ids)} SLURM jobs")
+    print(f"local run {t_local:.0f} s, SLURM run {t_slurm:.0f} s, {len(submitted)} SLURM jobs")
