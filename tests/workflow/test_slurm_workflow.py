@@ -21,7 +21,8 @@ fields.npz except the sampler's wall-clock timings *_time_s: serial simpleFoam a
 the chain are deterministic) and an identical atlas.json (patient lists, scores, regression).
 
 Needs root, slurm-wlm + munge (else the ``slurm_cluster`` fixture skips) and OpenFOAM.
-4 sbatch jobs (one per patient, the atlas); 17 min with the smoke tests at load 8-10 (2026-12-02).
+The SLURM run submits 4 jobs (one per patient, the atlas); with the smoke tests 17 min at load
+8-10 (2026-12-02).
 """
 
 from __future__ import annotations
