@@ -2,6 +2,7 @@
 """The transient solve's cost and answers under several PIMPLE settings, from one SIMPLE state.
 
     .venv/bin/python bench/transient_cost.py CASE -d DIR [--variant NAME:key=value,...]...
+    .venv/bin/python bench/transient_cost.py --jet-tube -d DIR [--variant ...]...
 
 CASE is a rendered case (``results/patients/<id>/case`` of a workflow run, or any
 :func:`vcs.cfd.render_case` output). The case is copied to DIR/simple and solved there with
@@ -10,6 +11,11 @@ copies that SIMPLE state to DIR/<NAME> and runs :func:`vcs.cfd.transient.transie
 its ``cfd.solver.transient`` keys changed (e.g. ``co1:max_co_end_cells=1`` holds every cell at
 Co 1, the pre-issue-23 time step). Default variants: ``co1`` (Co <= 1 on every cell, PISO),
 ``default`` (the configuration's), ``outer2`` (the end-plane factor with 2 outer correctors).
+
+``--jet-tube`` renders a cheap unsteady case instead: the paper's jet (1.2 m/s through a 0.2 cm2
+disc, Re_jet ~1,800 at nu 3.37e-6) into a 12 mm tube 36 mm long at 1.5 mm cells (jet cylinder
+one level finer), ~5k cells, so that long windows (the pre-issue-23 wash-out 1 + window 5
+flow-through times at Co <= 1 everywhere: variant ``long``) cost minutes, not hours.
 
 Prints, per variant: pimpleFoam CPU s (its logs' ExecutionTime), time steps, dt range, the
 window in flow-through times, and each mean with its 95 % half-width (inlet-outlet pressure
@@ -40,6 +46,44 @@ from vcs.cfd.transient import transient_fallback  # noqa: E402
 from vcs.cfd.utilities import _Runner  # noqa: E402
 
 DEFAULT_VARIANTS = ["co1:max_co_end_cells=1,outer_correctors=1", "default:", "outer2:outer_correctors=2"]
+JET_TUBE_VARIANTS = [
+    # the pre-issue-23 solve: a fixed wash-out of 1 and window of 5 flow-through times, Co <= 1 on every cell
+    "long:max_co_end_cells=1,washout_flow_throughs=1,min_washout_flow_throughs=1,min_flow_throughs=5,"
+    "max_flow_throughs=5",
+    "co1:max_co_end_cells=1",
+    "default:",
+    "outer2:outer_correctors=2",
+]
+
+
+def jet_tube(work: Path) -> Path:
+    """The unsteady jet tube of ``--jet-tube``, rendered with config/config.yaml's cfd (SIMPLE
+    stopped after 100 iterations: the jet is unsteady)."""
+    import numpy as np
+    import yaml
+
+    from vcs.cfd import render_case
+    from vcs.cfd.openfoam import deep_merge
+    from vcs.phantoms.analytic import write_closed_tube_stl
+
+    case = work / "jet_tube_case"
+    if (case / CASE_JSON).exists():
+        return case
+    work.mkdir(parents=True, exist_ok=True)
+    stl = write_closed_tube_stl(work / "jet_tube.stl", radius=0.006, length=0.036, n_theta=64, n_z=24,
+                                axis=np.array([0.3, 0.2, 1.0]))  # fmt: skip
+    cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["cfd"]
+    cfg.pop("flavour", None)
+    cfg = deep_merge(
+        cfg,
+        {
+            "mesh": {"cell_size": 1.5e-3, "jet_refinement": {"cells_across": 6, "radius": 1.5, "length": 3.0}},
+            "inlet": {"type": "jet", "velocity": 1.2, "valve_area": 2.0e-5, "flow_rate": None, "scaling": "fixed"},
+            "solver": {"max_iterations": 100, "startup_iterations": 20, "plateau": {"iterations": 0}},
+        },
+    )
+    render_case(case, stl, cfg)
+    return case
 
 
 def _value(v: str) -> float | int:
@@ -103,14 +147,17 @@ def row(name: str, st: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
-    ap.add_argument("case", type=Path, help="a rendered case")
+    ap.add_argument("case", type=Path, nargs="?", help="a rendered case")
+    ap.add_argument("--jet-tube", action="store_true", help="the cheap unsteady jet tube instead of CASE")
     ap.add_argument("-d", "--workdir", type=Path, required=True, help="where the copies are solved")
     ap.add_argument("--variant", action="append", help="NAME:key=value,... (cfd.solver.transient keys)")
     a = ap.parse_args(argv)
-    if not (a.case / CASE_JSON).exists():
+    a.workdir.mkdir(parents=True, exist_ok=True)
+    if a.jet_tube:
+        a.case = jet_tube(a.workdir.resolve())
+    if a.case is None or not (a.case / CASE_JSON).exists():
         print(f"transient_cost: error: {a.case} is not a rendered case (no {CASE_JSON})", file=sys.stderr)
         return 2
-    a.workdir.mkdir(parents=True, exist_ok=True)
     simple, status = simple_state(a.case.resolve(), a.workdir.resolve())
     print(
         f"SIMPLE state: {status['cells']:,} cells, {status['iterations']} iterations, converged "
@@ -121,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         "| dp Pa (95 %) | mean TAWSS Pa (95 %) | U +-% | known |"
     )
     print("|---" * 10 + "|")
-    for text in a.variant or DEFAULT_VARIANTS:
+    for text in a.variant or (JET_TUBE_VARIANTS if a.jet_tube else DEFAULT_VARIANTS):
         name, keys = parse_variant(text)
         print(row(name, run_variant(simple, status, a.workdir.resolve(), name, keys)), flush=True)
     print(f"{date.today()}, {platform.node()} ({os.cpu_count()} cores), load {os.getloadavg()[0]:.1f}")
