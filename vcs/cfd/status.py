@@ -24,6 +24,18 @@ from vcs.cfd.foamfiles import (
 from vcs.cfd.utilities import _latest_time
 
 
+def _json_safe(obj: Any) -> Any:
+    """``obj`` with every non-finite float (an error bar not known yet: inf; NaN) as None, so that
+    status.json is strict JSON (json.dumps would write the non-standard Infinity/NaN tokens)."""
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, (float, np.floating)) and not np.isfinite(obj):
+        return None
+    return obj
+
+
 def finish(
     case_dir: Path, status: dict[str, Any], reason: str | None = None, failed_log: str | None = None
 ) -> dict[str, Any]:
@@ -51,7 +63,7 @@ def finish(
         status["failed_log"] = str(case_dir / "logs" / f"log.{failed_log}")
     timings = status["timings_s"]
     timings["total"] = round(sum(v for k, v in timings.items() if k != "total"), 3)
-    (case_dir / "status.json").write_text(json.dumps(status, indent=2, default=float))
+    (case_dir / "status.json").write_text(json.dumps(_json_safe(status), indent=2, default=float))
     return status
 
 

@@ -134,7 +134,8 @@ class PlateauWatch:
     three windows of iterations before it is stopped, and the transient solve takes over at once
     instead of after ``max_iterations`` (AortaCFD patient1 at 0.59 mm: ~1 CPU s per iteration).
     A run still converging (residuals falling by a decade per few hundred iterations) is left
-    alone, to meet residualControl. The stop: ``stopAt writeNow``
+    alone, to meet residualControl. (With ``fallback: none`` a stalled run is stopped too: it
+    would end not converged at ``max_iterations`` all the same.) The stop: ``stopAt writeNow``
     in system/controlDict, read by the solver at its next iteration (``runTimeModifiable``), which
     writes that state and ends normally (the file's time stamp is moved past OpenFOAM's
     ``fileModificationSkew`` so that the change is seen at once).
@@ -201,8 +202,10 @@ def request_write_now(control: Path) -> None:
     at once."""
     before = control.stat().st_mtime
     text = control.read_text()
-    control.write_text(text.replace("stopAt          endTime;", "stopAt          writeNow;", 1))
-    os.utime(control, (time.time(), max(time.time(), before + 60.0)))
+    tmp = control.with_name(f".{control.name}.writeNow")  # written whole, then renamed: never read half
+    tmp.write_text(text.replace("stopAt          endTime;", "stopAt          writeNow;", 1))
+    os.utime(tmp, (time.time(), max(time.time(), before + 60.0)))
+    os.replace(tmp, control)
 
 
 EARLY_STOP_DECLINE = 1.5
@@ -290,7 +293,7 @@ def _plateau_check(
     from its last state; the solution is steady (``converged_by`` ``residual_plateau``) when the
     residuals stay below ``max_residual`` over those iterations, the inlet-outlet pressure
     difference departs from its first value by less than ``plateau.tolerance`` at every one of
-    them (relative to max(|dp|, 10 % of the inlet dynamic pressure), as in :func:`vcs.cfd.transient.stationarity`;
+    them (relative to max(|dp|, 10 % of the inlet dynamic pressure), as in :func:`vcs.cfd.transient.window_statistics`;
     every iteration, so a limit cycle whose period divides the window cannot pass), and the
     area-mean |WSS| and U (volume-weighted L2 of the change / of U) differ between the two states
     by less than ``plateau.tolerance``. A flow that keeps changing (a jet, vortex shedding) fails
@@ -387,7 +390,7 @@ def _plateau_iterations(
 
 def volume_l2_ratio(vol: NDArray[np.floating], diff: NDArray[np.floating], ref: NDArray[np.floating]) -> float:
     """Volume-weighted L2 norm of a change of a vector field relative to that of the field:
-    sqrt(sum V |diff|^2 / sum V |ref|^2) (the U criterion of the plateau and stationarity tests)."""
+    sqrt(sum V |diff|^2 / sum V |ref|^2) (the U criterion of the plateau check)."""
     return float(np.sqrt((vol * (diff**2).sum(1)).sum() / max((vol * (ref**2).sum(1)).sum(), 1e-300)))
 
 

@@ -15,8 +15,9 @@ autocorrelation makes the error look smaller than it is):
 
 and the confidence interval is Student's t with ``n_b - 1`` degrees of freedom. With fewer than
 :data:`MIN_BATCHES` batches the statistical error is not known yet (infinite). Whatever the
-statistics, a window's mean lies within the range of the values averaged: half the record's
-range (max - min) bounds the error too, and the smaller of the two bounds is reported (a laminar
+statistics, a window's mean lies within the range of the values averaged, and so does the mean
+of a longer record of a signal that stays within it: the record's range (max - min) bounds the
+error too, and the smaller of the two bounds is reported (a laminar
 flow settling to a steady state has a long, slowly decaying autocorrelation but a range far inside
 any tolerance; ``bound`` says which one was used).
 """
@@ -149,7 +150,8 @@ def mean_error(
         ``mean``, ``std`` (of the signal), ``integral_time_s``, ``n_batches``,
         ``standard_error`` (the larger of the integral-time-scale and batch-means estimates),
         ``half_width`` (the smaller of t quantile x standard error (inf with fewer than
-        :data:`MIN_BATCHES` batches) and half the record's range), ``bound`` (``statistics`` or
+        :data:`MIN_BATCHES` batches) and the record's range; inf with fewer than 2 samples),
+        ``bound`` (``statistics`` or
         ``range``), ``window_s``: floats (``bound`` a str), or (m,) arrays for ``m`` signals.
     """
     t = np.asarray(t, dtype=float)
@@ -163,9 +165,9 @@ def mean_error(
     window = float(t[keep][-1] - start) if keep.any() else 0.0
     for j in range(xs.shape[1]):
         r: dict[str, Any] = _one_mean_error(t[keep], xs[keep, j], start, window, confidence, t_int)
-        half_range = 0.5 * float(np.ptp(xs[keep, j])) if keep.any() else math.inf
-        if half_range < r["half_width"]:
-            r["half_width"], r["bound"] = half_range, "range"
+        rng = float(np.ptp(xs[keep, j])) if keep.sum() >= 2 else math.inf
+        if rng < r["half_width"]:
+            r["half_width"], r["bound"] = rng, "range"
         else:
             r["bound"] = "statistics"
         for k, v in r.items():

@@ -11,6 +11,7 @@ set pimpleFoam's Courant-limited step for the whole lumen.
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vcs.cfd.case import render_files
-from vcs.cfd.foamfiles import function_series, parse_solver_log, patch_geometry, read_dat, read_internal_field
+from vcs.cfd.foamfiles import function_series, parse_solver_log, patch_geometry, read_internal_field
 from vcs.cfd.status import _log_summary, _wall_faces
 from vcs.cfd.steady import STAGE_FILES, request_write_now
 from vcs.cfd.timeseries import mean_error, mser_truncation, uniform_record
@@ -261,14 +262,20 @@ def _cell_fields(case_dir: Path, ranks: int, time_name: str, names: tuple[str, .
 def end_plane_cells(
     centres: NDArray[np.floating],
     volumes: NDArray[np.floating],
-    planes: list[tuple[NDArray[np.floating], NDArray[np.floating]]],
+    planes: list[tuple[NDArray[np.floating], NDArray[np.floating], float]],
 ) -> NDArray[np.bool_]:
-    """Cells within :data:`END_PLANE_CELLS` of their own size (cube root of the volume) from any
-    of the end planes (point, unit normal): the cells snapping cuts into slivers."""
+    """Cells at an end patch: within :data:`END_PLANE_CELLS` of their own size (cube root of the
+    volume) from its plane (centroid, unit normal) and, in the plane, within the patch's radius
+    (the largest distance of its faces from the centroid) plus two own sizes: the cells snapping
+    cuts into slivers. (The plane alone would also take the lumen it crosses elsewhere: an aortic
+    root's inlet plane cuts the descending aorta.)"""
     h = np.cbrt(volumes)
     near = np.zeros(len(centres), dtype=bool)
-    for c, n in planes:
-        near |= np.abs((centres - c) @ n) < END_PLANE_CELLS * h
+    for c, n, radius in planes:
+        d = centres - c
+        normal = d @ n
+        in_plane = np.linalg.norm(d - normal[:, None] * n, axis=1)
+        near |= (np.abs(normal) < END_PLANE_CELLS * h) & (in_plane < radius + 2.0 * h)
     return near
 
 
@@ -313,7 +320,8 @@ def courant_plan(
             c, sf = patch_geometry(case_dir, p["name"])
             a = np.linalg.norm(sf, axis=1)
             n = sf.sum(axis=0)
-            planes.append(((c * a[:, None]).sum(axis=0) / a.sum(), n / np.linalg.norm(n)))
+            centre = (c * a[:, None]).sum(axis=0) / a.sum()
+            planes.append((centre, n / np.linalg.norm(n), float(np.linalg.norm(c - centre, axis=1).max())))
     near = end_plane_cells(centres, vols, planes)
     c_max = float(per_s.max())
     c_in = float(per_s[~near].max()) if (~near).any() else c_max
@@ -463,7 +471,7 @@ class WashoutWatch:
         t0 = self.plan["start_time"]
         try:
             rec = _records(self.case_dir, self.state, t0, math.inf)
-        except (ValueError, OSError, IndexError):  # nothing yet, or a record caught mid-write
+        except Exception:  # noqa: BLE001 - nothing yet, a record caught mid-write: look again later
             return
         now = float(rec["t"][-1])
         if now - t0 < self.plan["min_washout_s"]:
@@ -523,13 +531,13 @@ class AverageWatch:
         t0 = self.plan["averaging_start_time"]
         try:
             now = float(function_series(self.case_dir, _dp_names(self.state)[0][0])[-1, 0])
-        except (IndexError, ValueError, OSError):
+        except Exception:  # noqa: BLE001 - a watch never stops the solver by failing
             return
         if now < self.plan["min_end_time"]:
             return
         try:
             stats = window_statistics(self.case_dir, self.state, t0, now, self.peak)
-        except (ValueError, OSError, IndexError):  # a record caught mid-write: look again later
+        except Exception:  # noqa: BLE001 - a record caught mid-write: look again later
             return
         if stats["stationary"]:
             request_write_now(self.case_dir / "system" / "controlDict")
@@ -575,17 +583,32 @@ def _records(case_dir: Path, state: dict[str, Any], start: float, end: float) ->
 
 
 def _probe_series(case_dir: Path) -> NDArray[np.floating] | None:
-    """The probes' U record (time, then 3 components per probe), over all start folders; None when
-    there is none. Probes outside the mesh (OpenFOAM writes a huge value) are dropped."""
+    """The probes' U record (time, then 3 components per probe) of the latest start folder; None
+    when there is none. A last line still being written is left out (rows must have 1 + 3 N
+    numbers for the N probes of the file's header); probes outside the mesh (OpenFOAM writes a
+    huge value) are dropped."""
     files = sorted((case_dir / "postProcessing" / "probes").glob("*/U"), key=lambda p: float(p.parent.name))
     if not files:
         return None
-    arr = read_dat(files[-1])
-    if arr.shape[0] == 0 or (arr.shape[1] - 1) % 3:
+    text = files[-1].read_text(errors="replace")
+    n_probes = len(re.findall(r"^#\s*Probe\s+\d+\s*\(", text, re.M))
+    width = 1 + 3 * n_probes
+    rows = []
+    for line in text.splitlines(keepends=True):
+        if line.startswith("#") or not line.endswith("\n"):
+            continue
+        vals = line.replace("(", " ").replace(")", " ").split()
+        if n_probes and len(vals) == width:
+            try:
+                rows.append([float(v) for v in vals])
+            except ValueError:
+                continue
+    if not rows:
         return None
-    vals = arr[:, 1:].reshape(len(arr), -1, 3)
-    ok = np.all(np.abs(vals) < 1e10, axis=(0, 2))
-    return np.column_stack([arr[:, :1], vals[:, ok, :].reshape(len(arr), -1)])
+    arr = np.array(rows)
+    u = arr[:, 1:].reshape(len(arr), -1, 3)
+    ok = np.all(np.abs(u) < 1e10, axis=(0, 2))
+    return np.column_stack([arr[:, :1], u[:, ok, :].reshape(len(arr), -1)])
 
 
 def window_statistics(
@@ -595,8 +618,9 @@ def window_statistics(
 
     For each record (inlet-outlet pressure difference, area-mean |WSS| on the wall, and the
     velocity at the probe cells), the mean and the half-width of its confidence interval
-    (:func:`vcs.cfd.timeseries.mean_error`: batch means of at least 5 integral time scales, and
-    the integral-time-scale estimate 2 T_int sigma^2 / T, the larger). Relative half-widths:
+    (:func:`vcs.cfd.timeseries.mean_error`: batch means over at least 5 batches of 3 integral time
+    scales, and the integral-time-scale estimate 2 T_int sigma^2 / T, the larger; or the record's
+    range when smaller). Relative half-widths:
 
     * dp: half-width / max(|mean dp|, 10 % of the inlet dynamic pressure U_peak^2 / 2) (dp may
       cross zero);
@@ -641,8 +665,11 @@ def window_statistics(
             "n_probes": len(mean) // 3,
             "integral_time_s": float(np.median(e_u["integral_time_s"])),
             "n_batches": int(np.min(e_u["n_batches"])),
-            "bound_range_probes": int(np.sum(np.asarray(e_u["bound"]) == "range")) // 3,
+            "bound_range_probes": int(np.any(np.asarray(e_u["bound"]).reshape(-1, 3) == "range", axis=1).sum()),
         }
+    if rec["U"] is None and (case_dir / "postProcessing" / "probes").is_dir():
+        rel["U"] = math.inf  # probes asked for, no complete record (yet): U not known
+        st["U"] = {"relative": math.inf, "n_probes": 0}
     tols = {
         "inlet_minus_outlet_pressure": float(tr["error_tolerance"]),
         "tawss_mean": float(tr["error_tolerance"]),
@@ -736,11 +763,14 @@ def _record_verdict(
         status["converged"] = True
         status["reason"] = None
     else:
+        bad = [k for k, v in verdict["relative_errors"].items() if not v <= verdict["tolerances"][k]]
+        keys = " or ".join(dict.fromkeys("error_tolerance_U" if k == "U" else "error_tolerance" for k in bad))
+        which = "the window ended early but" if tr.get("ended_early_at") is not None else "after the longest window"
         status["reason"] = (
-            f"{simple_reason}; time average not known to the tolerance after the longest window "
-            f"({tr['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
+            f"{simple_reason}; time average not known to the tolerance ({which} "
+            f"{tr['window_flow_throughs']:.3g} flow-through times of {plan['flow_through_time_s']:.3g} s, after a "
             f"{plan['washout_s']:.3g} s wash-out): {verdict['why']}; raise cfd.solver.transient.max_flow_throughs "
-            "(or error_tolerance)"
+            f"(or {keys or 'error_tolerance'})"
         )
 
 
