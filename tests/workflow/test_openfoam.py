@@ -675,13 +675,13 @@ def test_transient_plan_from_flow_through_time():
     plan = transient_plan(state, 2.078e-4, 1000.0, 1.2)
     t_ft = 2.078e-4 / 1.2e-4
     assert plan["flow_through_time_s"] == pytest.approx(t_ft)
-    # defaults: wash-out 1, window 1 to 10 flow-through times, each rounded up to 3 digits
-    assert plan["min_window_s"] == pytest.approx(1.74) and plan["washout_s"] == pytest.approx(1.74)
+    # defaults: wash-out 1, window 2 to 10 flow-through times, each rounded up to 3 digits
+    assert plan["min_window_s"] == pytest.approx(3.47) and plan["washout_s"] == pytest.approx(1.74)
     assert plan["max_window_s"] == pytest.approx(17.4)
-    assert plan["min_window_flow_throughs"] >= 1 and plan["washout_flow_throughs"] >= 1
+    assert plan["min_window_flow_throughs"] >= 2 and plan["washout_flow_throughs"] >= 1
     assert plan["max_window_flow_throughs"] >= 10
     assert plan["averaging_start_time"] == pytest.approx(1001.74) and plan["max_end_time"] == pytest.approx(1019.14)
-    assert plan["min_end_time"] == pytest.approx(1001.74 + 1.74)
+    assert plan["min_end_time"] == pytest.approx(1001.74 + 3.47)
     assert plan["delta_t_initial_s"] == pytest.approx(1.0 * 1e-3 / 1.2)
     assert plan["max_delta_t_s"] == pytest.approx(0.02 * t_ft)
 

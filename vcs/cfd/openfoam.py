@@ -108,7 +108,7 @@ DEFAULTS: dict[str, Any] = {
             # start-up transient is over (MSER-5), after at least min_washout_flow_throughs
             "washout_flow_throughs": 1.0,
             "min_washout_flow_throughs": 0.25,
-            "min_flow_throughs": 1.0,  # shortest averaging window [flow-through times]
+            "min_flow_throughs": 2.0,  # shortest averaging window [flow-through times]: slow modes (a jet)
             # longest: a window whose means are not known to the tolerance by then is not stationary
             "max_flow_throughs": 10.0,
             "error_tolerance": 0.03,  # half-width of the confidence interval of the mean, relative:
