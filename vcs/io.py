@@ -259,11 +259,14 @@ def _read_with_vtk(path: Path) -> vtkPolyData:
     if name == "vtkDataSetReader":
         for what in ("Scalars", "ColorScalars", "Normals", "TCoords", "Vectors", "Fields", "Tensors"):
             getattr(reader, f"ReadAll{what}On")()
-    if reader.Update() == 0:  # VTK >= 9.7 says whether the update worked (older: None)
-        raise RuntimeError(f"{name} failed")
+    ok = reader.Update() != 0  # VTK >= 9.7 says whether the update worked (older: None)
     mesh = reader.GetOutputDataObject(0)
     if mesh is None:
         raise RuntimeError(f"{name} produced no output")
+    if not ok and not (isinstance(mesh, vtkPolyData) and mesh.GetNumberOfPoints() == 0):
+        raise RuntimeError(f"{name} failed")
+    # (a failed update that left an empty surface, e.g. text in a .stl: the caller's one line,
+    # "contains no surface triangles", as with pyvista.read, README "Bad input")
     if not isinstance(mesh, vtkPolyData):  # rare: loads pyvista (held signals: no SIGSEGV on Ctrl-C)
         import pyvista as pv
 
