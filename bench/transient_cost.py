@@ -3,6 +3,12 @@
 
     .venv/bin/python bench/transient_cost.py CASE -d DIR [--variant NAME:key=value,...]...
     .venv/bin/python bench/transient_cost.py --jet-tube -d DIR [--variant ...]...
+    .venv/bin/python bench/transient_cost.py --at 1 1.5 2.3 -d DIR --variant default:  # re-judge
+
+``--at F...`` re-reads a variant's records (finished or stopped) and prints its window's
+relative 95 % half-widths (dp / mean TAWSS / U) and means after F flow-through times of
+averaging, with the pimpleFoam time steps and CPU seconds up to then (the README's patient1
+figures at 1, 1.5 and 2.3 flow-throughs).
 
 CASE is a rendered case (``results/patients/<id>/case`` of a workflow run, or any
 :func:`vcs.cfd.render_case` output). The case is copied to DIR/simple and solved there with
@@ -145,13 +151,58 @@ def row(name: str, st: dict) -> str:
     )
 
 
+def judge_at(dst: Path, fts: list[float]) -> None:
+    """Print the window statistics of the variant in ``dst`` after each of ``fts`` flow-through times."""
+    from vcs.cfd.foamfiles import function_series, parse_solver_log
+    from vcs.cfd.transient import window_statistics
+
+    state = _read_state(dst, 1)
+    if (dst / "transient_status.json").exists():
+        tr = json.loads((dst / "transient_status.json").read_text())["transient"]
+        t0, t_ft = tr["averaging_start_time"], tr["flow_through_time_s"]
+    else:  # a variant stopped before its end: the averaging stage's start folder, the SIMPLE status
+        t0 = max(float(d.name) for d in (dst / "postProcessing" / "probes").iterdir())
+        t_ft = json.loads((dst / "status.json").read_text())["lumen_volume_m3"] / float(state["flow_rate"])
+    peak = float(inlet_profile(dst, state)["peak_velocity"])
+    last = float(function_series(dst, "pressure_inlet")[-1, 0])
+    for ft in fts:
+        end = t0 + ft * t_ft
+        if end > last:
+            print(f"{dst.name}: {ft:g} flow-throughs not reached (record ends at {(last - t0) / t_ft:.3g})")
+            continue
+        st = window_statistics(dst, state, t0, end, peak)
+        steps, cpu = 0, 0.0
+        for log in ("log.pimpleFoam.washout", "log.pimpleFoam.average"):
+            rows = [r for r in parse_solver_log(dst / "logs" / log)["rows"] if r["time"] <= end + 1e-12]
+            steps += len(rows)
+            with open(dst / "logs" / log) as fh:  # ExecutionTime of the last step at or before `end`
+                t, cpu_log = None, 0.0
+                for line in fh:
+                    if line.startswith("Time = "):
+                        t = float(line.split()[2].rstrip("s"))
+                    elif line.startswith("ExecutionTime") and t is not None and t <= end + 1e-12:
+                        cpu_log = float(line.split()[2])
+                cpu += cpu_log
+        rel, s = st["relative_errors"], st["statistics"]
+        print(
+            f"{dst.name} after {ft:g} flow-throughs: dp {s['inlet_minus_outlet_pressure']['mean_Pa']:.5g} Pa, "
+            + ", ".join(f"{k} +-{100 * v:.2g} %" for k, v in rel.items())
+            + f"; {steps:,} time steps, {cpu:.0f} CPU s of pimpleFoam"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("case", type=Path, nargs="?", help="a rendered case")
     ap.add_argument("--jet-tube", action="store_true", help="the cheap unsteady jet tube instead of CASE")
+    ap.add_argument("--at", type=float, nargs="+", help="re-judge each --variant's window at these flow-throughs")
     ap.add_argument("-d", "--workdir", type=Path, required=True, help="where the copies are solved")
     ap.add_argument("--variant", action="append", help="NAME:key=value,... (cfd.solver.transient keys)")
     a = ap.parse_args(argv)
+    if a.at:
+        for text in a.variant or ["default:"]:
+            judge_at(a.workdir.resolve() / parse_variant(text)[0], a.at)
+        return 0
     a.workdir.mkdir(parents=True, exist_ok=True)
     if a.jet_tube:
         a.case = jet_tube(a.workdir.resolve())
