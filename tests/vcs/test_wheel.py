@@ -61,6 +61,7 @@ def test_wheel_from_the_sdist_has_the_templates(tmp_path):
     names = zipfile.ZipFile(whl).namelist()
     assert "vcs/cfd/templates/openfoam/common/system/snappyHexMeshDict" in names
     assert "vcs/cfd/templates/openfoam/org10/constant/physicalProperties" in names
+    assert "vcs/data/waveforms/ascending_aorta.csv" in names  # package data (pyproject.toml)
 
 
 def test_wheel_contains_templates_and_every_package(wheel):
@@ -75,6 +76,8 @@ def test_wheel_contains_templates_and_every_package(wheel):
     assert not missing, f"templates missing from the wheel: {missing}"
     packages = sorted(p.parent.relative_to(REPO).as_posix() for p in (REPO / "vcs").rglob("__init__.py"))
     assert all(f"{p}/__init__.py" in names for p in packages), packages
+    waveforms = sorted(p.relative_to(REPO).as_posix() for p in (REPO / "vcs" / "data").rglob("*.csv"))
+    assert waveforms and all(w in names for w in waveforms), waveforms
 
 
 def test_case_renders_from_a_non_editable_install(wheel, tmp_path):
@@ -92,6 +95,9 @@ from vcs.cfd import render_case
 from vcs.phantoms.analytic import write_closed_tube_stl
 assert vcs.__file__.startswith({str(site)!r}), vcs.__file__
 assert str(o.template_dir()).startswith({str(site)!r}), o.template_dir()
+from vcs.cfd.waveform import default_waveform_path, load_waveform
+assert str(default_waveform_path()).startswith({str(site)!r}), default_waveform_path()
+assert load_waveform(default_waveform_path()).n_samples >= 50
 stl = write_closed_tube_stl("tube.stl", radius=0.005, length=0.05, n_theta=24, n_z=10)
 state = render_case("case", stl, {{"mesh": {{"cell_size": 1e-3}}}}, flavour="esi")
 print(sorted(state["files"]))
