@@ -6,14 +6,16 @@ The pieces, each a plain function or a small frozen value object:
   (optionally similarity) alignment of corresponding point sets (Section 2.3.2) on the Eq. 8 wall
   grid (:func:`wall_grid_points`); :func:`transform_model`, :func:`align_models`.
 * :mod:`vcs.atlas.pca`: :class:`PCA` (Section 2.3.3) of feature vectors (:func:`shape_matrix`) or
-  of resampled flow fields (:func:`flow_vector`); :func:`mode_deformation` (paper Fig. 7);
-  :func:`top_variation_mask`.
+  of resampled flow fields (:func:`flow_vector`; of a pulsatile cohort also the
+  :data:`WALL_MARKERS` and the phase fields, :func:`pulsatile_fields`); :func:`mode_deformation`
+  (paper Fig. 7); :func:`top_variation_mask`.
 * :mod:`vcs.atlas.regression`: :func:`ridge_loo` (beyond the paper), shape scores -> flow scores
   ridge regression with leave-one-out cross-validated R^2; :func:`loo_sufficiency` (too few
   patients to say anything) and :func:`r2_skill` (``none`` for R^2 <= 0).
 * :mod:`vcs.atlas.cohort`: :func:`patient_exclusion` (stage and reason from the fit report,
-  :func:`status_exclusion`, the fields), :func:`compute_atlas` (the whole cohort pipeline, arrays
-  only), :func:`project_model`, :func:`atlas_summary`.
+  :func:`status_exclusion`, the fields), :func:`cohort_flow_kind` (steady or pulsatile, never
+  both), :func:`compute_atlas` (the whole cohort pipeline, arrays only), :func:`project_model`,
+  :func:`atlas_summary`.
 * :mod:`vcs.atlas.build`: :func:`build_atlas` writes ``atlas.json``, ``atlas.npz`` and the figures.
 * :mod:`vcs.atlas.plots`: the figures and geometry files (pyvista, matplotlib).
 
@@ -24,9 +26,11 @@ the plotting module only when it writes figures.
 
 from vcs.atlas.build import build_atlas
 from vcs.atlas.cohort import (
+    NON_FINITE_RULE,
     STAGES,
     Atlas,
     atlas_summary,
+    cohort_flow_kind,
     compute_atlas,
     fit_exclusion,
     patient_exclusion,
@@ -37,10 +41,16 @@ from vcs.atlas.cohort import (
 from vcs.atlas.pca import (
     FLOW_FIELDS,
     PCA,
+    PHASE_QUANTITIES,
     SHAPE_BLOCKS,
     VECTOR_FIELDS,
+    WALL_MARKERS,
+    field_key,
+    field_slug,
     flow_vector,
     mode_deformation,
+    phase_field,
+    pulsatile_fields,
     shape_matrix,
     top_variation_mask,
 )
@@ -60,25 +70,33 @@ from vcs.atlas.regression import DEFAULT_ALPHAS, loo_sufficiency, r2_skill, ridg
 __all__ = [
     "DEFAULT_ALPHAS",
     "FLOW_FIELDS",
+    "NON_FINITE_RULE",
     "PCA",
+    "PHASE_QUANTITIES",
     "SHAPE_BLOCKS",
     "STAGES",
     "TWO_PI",
     "VECTOR_FIELDS",
+    "WALL_MARKERS",
     "Atlas",
     "RigidTransform",
     "align_models",
     "atlas_summary",
     "build_atlas",
     "check_compatible",
+    "cohort_flow_kind",
     "compute_atlas",
+    "field_key",
+    "field_slug",
     "flow_vector",
     "generalized_procrustes",
     "loo_sufficiency",
     "mode_deformation",
     "patient_exclusion",
+    "phase_field",
     "procrustes",
     "project_model",
+    "pulsatile_fields",
     "r2_skill",
     "ridge_loo",
     "shape_matrix",

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from vcs.atlas.cohort import Atlas, atlas_summary, compute_atlas
+from vcs.atlas.pca import field_slug
 
 if TYPE_CHECKING:
     from vcs.vessel import VesselModel
@@ -38,8 +39,13 @@ def build_atlas(
 
     Writes ``atlas.json`` (patients included/excluded with stages and reasons, explained
     variances, scores, regression R^2 with its status and skill), ``atlas.npz`` (every PCA's mean,
-    modes, sigma, scores; the field grid) and, with ``figures``, the VTP/VTU files of
+    modes, sigma, scores, as ``shape_*`` and ``flow_{field}_*`` with ``{field}`` the
+    :func:`vcs.atlas.pca.field_slug` of the flow field, e.g. ``flow_phase_peak_systole_U_mean``,
+    and ``flow_{field}_support`` of a wall marker that left cells out; the field grid; the
+    ``phase_names`` of a pulsatile cohort) and, with ``figures``, the VTP/VTU files of
     :func:`vcs.atlas.plots.write_atlas_figures` in ``out_dir`` and its PNGs in ``figure_dir``.
+    A pulsatile cohort's fields (cycle averages, wall markers, phase fields) go through as they
+    are: which PCAs an atlas has is decided by :func:`vcs.atlas.cohort.compute_atlas`.
 
     Parameters
     ----------
@@ -77,9 +83,11 @@ def build_atlas(
     summary = atlas_summary(atlas)
     arrays: dict[str, Any] = {
         **atlas.shape.arrays("shape"),
-        **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{f}").items()},
+        **{k: v for f, p in atlas.flow.items() for k, v in p.arrays(f"flow_{field_slug(f)}").items()},
     }
     arrays.update({f"grid_{k}": v for k, v in atlas.grid.items()})
+    if atlas.phase_names:
+        arrays["phase_names"] = np.array(atlas.phase_names)
     np.savez_compressed(out / "atlas.npz", **arrays)
     if figures:
         from vcs.atlas.plots import COLOUR_PERCENTILES, write_atlas_figures
@@ -88,7 +96,8 @@ def build_atlas(
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
         summary["colour_limits"] = {
             "percentiles": list(COLOUR_PERCENTILES),
-            "shared_by": "the mean - 2 sigma, mean and mean + 2 sigma panels of each flow figure",
+            "shared_by": "the mean - 2 sigma, mean and mean + 2 sigma panels of each flow figure "
+            "(of a wall field: its values on the wall)",
             "limits": written["colour_limits"],
         }
     (out / "atlas.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")

@@ -12,7 +12,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from vcs.atlas.pca import FLOW_FIELDS, PCA, flow_vector, shape_matrix
+from vcs.atlas.pca import (
+    FIELD_UNITS,
+    FLOW_FIELDS,
+    MARKER_TRANSFORMS,
+    PCA,
+    WALL_MARKERS,
+    field_key,
+    flow_vector,
+    pulsatile_fields,
+    shape_matrix,
+)
 from vcs.atlas.procrustes import (
     RigidTransform,
     align_models,
@@ -30,6 +40,13 @@ if TYPE_CHECKING:
 
 #: Stages of a patient's chain, in order (the ``stage`` of an exclusion in atlas.json).
 STAGES = ("fit", "wall", "case", "mesh", "solve", "sampling")
+#: How a wall marker's PCA treats non-finite values (atlas.json ``wall_markers``).
+NON_FINITE_RULE = (
+    "a wall cell where any included patient's marker is not finite (log10_RRT: where RRT is not finite "
+    "and positive, i.e. OSI = 0.5 or TAWSS = 0) is left out of that marker's PCA: NaN in its mean and "
+    "+-2 sigma maps, 0 in its modes, never replaced by a number; a marker with no cell left has no PCA "
+    "(its record's 'excluded' says why)"
+)
 _MESH_UTILITIES = ("blockMesh", "snappyHexMesh", "checkMesh")
 
 
@@ -192,7 +209,8 @@ class Atlas:
     shape : PCA
         Shape PCA of the aligned feature vectors (mm).
     flow : dict
-        {field: PCA} of the flow measurement vectors.
+        {field: PCA} of the flow measurement vectors (names: :mod:`vcs.atlas.pca`; of a pulsatile
+        cohort also the wall markers and the phase fields).
     field_shapes : dict
         {field: grid shape of the measurement vector}, e.g. (n_tau, n_theta, n_rho, 3).
     grid : dict
@@ -208,12 +226,24 @@ class Atlas:
         GPA mean wall grid, the target a new vessel is aligned to.
     field_sources : dict
         {included patient id: ``time_average`` (the transient fallback's window means),
-        ``instantaneous`` (a converged steady state), from each patient's fields ``field_source``,
-        or ``simple_iterate_average`` (a legacy status admitted by ``accept_relaxed``)}.
+        ``instantaneous`` (a converged steady state), ``pulsatile`` (cardiac-cycle averages,
+        markers and phases), from each patient's fields ``field_source``, or
+        ``simple_iterate_average`` (a legacy status admitted by ``accept_relaxed``)}.
     time_average_errors : dict
         {included patient id whose flow is a time average: its status ``time_average_errors``
         (the relative half-widths of the confidence intervals of its means, their confidence
         level and tolerances, the window in flow-through times)}.
+    flow_kind : {"steady", "pulsatile"}
+        ``pulsatile`` when the included patients' ``field_source`` is (all of them, see
+        :func:`cohort_flow_kind`), else ``steady``.
+    phase_names : tuple of str
+        The phases of a pulsatile cohort's phase fields (empty for a steady one).
+    wall_markers : dict
+        {wall marker asked for: ``data`` (its fields.npz array), ``transform`` (None or
+        ``log10``), ``units``, ``n_cells``, ``n_left_out`` (cells left out of its PCA,
+        :data:`NON_FINITE_RULE`), ``non_finite_by_patient`` ({patient: cells whose value is not
+        finite (log10_RRT: whose RRT is not finite and positive)}, only patients that have some)
+        and, for a marker without a PCA, ``excluded`` (the reason)}.
     """
 
     patients: list[str]
@@ -229,8 +259,11 @@ class Atlas:
     options: dict[str, Any]
     alignment_mean: np.ndarray  # (n_tau_align * n_theta_align, 3) GPA mean wall grid, mm
     exclusion_stages: dict[str, str] = field(default_factory=dict)  # excluded id -> stage
-    field_sources: dict[str, str] = field(default_factory=dict)  # included id -> time_average | instantaneous
+    field_sources: dict[str, str] = field(default_factory=dict)  # included id -> time_average | instantaneous | ...
     time_average_errors: dict[str, dict[str, Any]] = field(default_factory=dict)  # included id -> error bars
+    flow_kind: str = "steady"  # steady | pulsatile
+    phase_names: tuple[str, ...] = ()  # phases of a pulsatile cohort's phase fields
+    wall_markers: dict[str, dict[str, Any]] = field(default_factory=dict)  # marker -> non-finite record
 
 
 def compute_atlas(
@@ -245,7 +278,7 @@ def compute_atlas(
     n_tau_align: int = 40,
     n_theta_align: int = 24,
     flow_frame: str = "vcs",
-    flow_fields: Sequence[str] = FLOW_FIELDS,
+    flow_fields: Sequence[str] | None = None,
     shape_block: str = "all",
     accept_relaxed: bool = False,
 ) -> Atlas:
@@ -276,8 +309,14 @@ def compute_atlas(
         Wall grid of the alignment correspondences.
     flow_frame : {"vcs", "cartesian"}
         Local-frame vector components (default) or Cartesian ones (:func:`vcs.atlas.pca.flow_vector`).
-    flow_fields : sequence of str
-        Fields with a flow PCA (default U, p, WSS).
+    flow_fields : sequence of str, optional
+        Fields with a flow PCA (names of :mod:`vcs.atlas.pca`). Default by the cohort's flow
+        (:func:`cohort_flow_kind`): U, p, WSS of a steady cohort; of a pulsatile one also the wall
+        markers TAWSS, OSI, log10_RRT, ECAP (scalar (n_tau, n_theta) maps) and
+        ``phase/<name>/U|p|WSS`` of each of its ``phase_names``
+        (:func:`vcs.atlas.pca.pulsatile_fields`). A wall marker's PCA leaves out the cells where
+        any patient's value is not finite (:data:`NON_FINITE_RULE`); every other field must be
+        finite.
     shape_block : {"all", "wall", "centerline"}
         Which part of the feature vector the shape PCA varies (:func:`vcs.atlas.pca.shape_matrix`).
     accept_relaxed : bool
@@ -290,7 +329,9 @@ def compute_atlas(
     Raises
     ------
     VCSInputError
-        Fewer than 3 included patients, or fields resampled on different grids.
+        Fewer than 3 included patients; pulsatile and steady patients together
+        (:func:`cohort_flow_kind`); pulsatile patients sampled at different phases; fields
+        missing, resampled on different grids or (other than a wall marker) not finite.
     """
     reports = reports or {}
     excluded, stages = {}, {}
@@ -312,19 +353,13 @@ def compute_atlas(
     if len(patients) < 3:
         listed = "; ".join(f"{p} ({stages[p]}: {r})" for p, r in excluded.items()) or "none"
         raise VCSInputError(f"an atlas needs at least 3 included patients, got {len(patients)} (excluded: {listed})")
-    shapes0 = {
-        f: np.shape(np.asarray(fields[patients[0]][f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f]))
-        for f in flow_fields
-    }
-    for pid in patients:
-        for f in flow_fields:
-            key = f"{f}_vcs" if flow_frame == "vcs" and f != "p" else f
-            if np.shape(np.asarray(fields[pid].get(key))) != shapes0[f]:
-                raise VCSInputError(
-                    f"patient {pid}: field {key} has shape {np.shape(np.asarray(fields[pid].get(key)))}, "
-                    f"patient {patients[0]} "
-                    f"{shapes0[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
-                )
+    sources = {p: _field_source(fields[p], statuses.get(p)) for p in patients}
+    kind = cohort_flow_kind(sources)
+    phases = _phase_names(fields, patients) if kind == "pulsatile" else ()
+    if flow_fields is None:
+        flow_fields = pulsatile_fields(phases) if kind == "pulsatile" else FLOW_FIELDS
+    flow_fields = tuple(flow_fields)
+    shapes0 = _check_fields(fields, patients, flow_fields, flow_frame)
     # one L for the cohort: the largest any included patient was fitted with (each fitted with
     # --L auto picks what its vessel needs); the others are refitted to it (VesselModel.with_n_knots)
     knots = {p: models[p].n_knots for p in patients}
@@ -341,14 +376,33 @@ def compute_atlas(
     }
     gpa_mean = report.pop("mean_points_mm")
     shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
-    flow = {
-        f: PCA.from_data(np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients]), n_modes)
-        for f in flow_fields
-    }
+    flow: dict[str, PCA] = {}
+    markers: dict[str, dict[str, Any]] = {}
+    for f in flow_fields:
+        X = np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients])
+        if f not in WALL_MARKERS:
+            flow[f] = PCA.from_data(X, n_modes)
+            continue
+        bad = ~np.isfinite(X)
+        left_out = int(bad.any(axis=0).sum())
+        markers[f] = {
+            "data": field_key(f, flow_frame),
+            "transform": "log10" if f in MARKER_TRANSFORMS else None,
+            "units": FIELD_UNITS[f],
+            "n_cells": int(X.shape[1]),
+            "n_left_out": left_out,
+            "non_finite_by_patient": {p: int(n) for p, n in zip(patients, bad.sum(axis=1)) if n},
+        }
+        if left_out == X.shape[1]:
+            markers[f]["excluded"] = f"no wall cell where every included patient's {markers[f]['data']} is finite" + (
+                " and positive" if f in MARKER_TRANSFORMS else ""
+            )
+            continue
+        flow[f] = PCA.from_data(X, n_modes, drop_non_finite=True)
     k = min(n_regression_scores or n_modes, shape.n_modes)
     sufficiency, why = loo_sufficiency(len(patients), k)
     regression = {}
-    for f in flow_fields:
+    for f in flow:
         r = ridge_loo(shape.scores[:, :k], flow[f].scores)
         r["status"], r["status_reason"] = sufficiency, why
         r["skill"] = [sufficiency if sufficiency != "ok" else r2_skill(float(v)) for v in np.atleast_1d(r["r2"])]
@@ -375,21 +429,110 @@ def compute_atlas(
             "n_theta_align": n_theta_align,
             "shape_block": shape_block,
             "accept_relaxed": accept_relaxed,
+            "flow_fields": list(flow_fields),
         },
         gpa_mean,
         stages,
-        {p: _field_source(fields[p], statuses.get(p)) for p in patients},
+        sources,
         {
             p: dict(st["time_average_errors"])
             for p in patients
             if (st := statuses.get(p)) and st.get("time_average_errors")
         },
+        kind,
+        phases,
+        markers,
     )
 
 
+def cohort_flow_kind(sources: Mapping[str, str]) -> str:
+    """``pulsatile`` when every patient's field source is ``pulsatile``, ``steady`` when none is.
+
+    An atlas never mixes the two: a steady flow (``instantaneous``, ``time_average``,
+    ``simple_iterate_average``) and the cycle average of a pulsatile one are different quantities,
+    and only pulsatile patients have the wall markers and phase fields.
+
+    Parameters
+    ----------
+    sources : {patient id: field source}
+
+    Returns
+    -------
+    {"steady", "pulsatile"}
+
+    Raises
+    ------
+    VCSInputError
+        Pulsatile and steady patients together: one line naming both groups and the fix.
+    """
+    pulsatile = [p for p, s in sources.items() if s == "pulsatile"]
+    steady = [f"{p} ({s})" for p, s in sources.items() if s != "pulsatile"]
+    if pulsatile and steady:
+        raise VCSInputError(
+            f"an atlas cannot mix pulsatile and steady flows: pulsatile {', '.join(pulsatile)}; "
+            f"steady {', '.join(steady)}; run every patient with the same cfd.inlet.waveform setting"
+        )
+    return "pulsatile" if pulsatile else "steady"
+
+
+def _phase_names(fields: Mapping[str, Mapping[str, Any]], patients: Sequence[str]) -> tuple[str, ...]:
+    """The pulsatile patients' common ``phase_names`` (the first patient's order).
+
+    Raises
+    ------
+    VCSInputError
+        The patients were sampled at different phases.
+    """
+    names = {p: tuple(str(x) for x in np.atleast_1d(np.asarray(fields[p].get("phase_names", [])))) for p in patients}
+    first = names[patients[0]]
+    differ = [p for p in patients if set(names[p]) != set(first)]
+    if differ:
+        listed = "; ".join(f"{p} {', '.join(names[p]) or 'none'}" for p in [patients[0], *differ])
+        raise VCSInputError(
+            f"the pulsatile patients were sampled at different phases ({listed}); "
+            "sample every patient at the same phases"
+        )
+    return first
+
+
+def _check_fields(
+    fields: Mapping[str, Mapping[str, Any]], patients: Sequence[str], flow_fields: Sequence[str], frame: str
+) -> dict[str, tuple[int, ...]]:
+    """{field: grid shape} of the flow fields, the same for every patient.
+
+    Raises
+    ------
+    VCSInputError
+        A patient lacks a field's array, its shape differs from the first patient's, or a field
+        other than a wall marker holds non-finite values.
+    """
+    shapes: dict[str, tuple[int, ...]] = {}
+    for f in flow_fields:
+        key = field_key(f, frame)
+        for pid in patients:
+            if key not in fields[pid]:
+                raise VCSInputError(
+                    f"patient {pid}: the resampled fields have no '{key}' (for the {f} PCA); "
+                    "resample the case with vcs.cfd.resample.sample_case"
+                )
+            a = np.asarray(fields[pid][key])
+            shapes.setdefault(f, a.shape)
+            if a.shape != shapes[f]:
+                raise VCSInputError(
+                    f"patient {pid}: field {key} has shape {a.shape}, patient {patients[0]} "
+                    f"{shapes[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
+                )
+            if f not in WALL_MARKERS and not np.isfinite(a).all():
+                raise VCSInputError(
+                    f"patient {pid}: field {key} has {int((~np.isfinite(a)).sum())} non-finite values; "
+                    f"resample the case (only the wall markers {', '.join(WALL_MARKERS)} may be non-finite)"
+                )
+    return shapes
+
+
 def _field_source(fields: Mapping[str, Any], status: Mapping[str, Any] | None) -> str:
-    """What an included patient's flow is: ``time_average``, ``instantaneous`` (a steady state) or,
-    for a legacy status admitted by ``accept_relaxed``, ``simple_iterate_average``."""
+    """What an included patient's flow is: ``time_average``, ``instantaneous`` (a steady state),
+    ``pulsatile`` or, for a legacy status admitted by ``accept_relaxed``, ``simple_iterate_average``."""
     if status and status.get("converged") is False and status.get("converged_relaxed") is True:
         return "simple_iterate_average"
     return str(np.asarray(fields.get("field_source", "instantaneous")))
@@ -458,9 +601,21 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         patient's transform), explained variances, sigmas and scores of the shape and flow PCAs,
         and the leave-one-out R^2 of the shape -> flow regression (null where undefined) with its
         ``status`` (``insufficient_patients`` when leave-one-out cannot say anything) and the
-        ``skill`` of each flow mode (``none`` for R^2 <= 0).
+        ``skill`` of each flow mode (``none`` for R^2 <= 0). The flow entries are keyed by the
+        PCAs' names (:mod:`vcs.atlas.pca`): U, p, WSS, and for a pulsatile cohort (``flow_kind``,
+        with its ``phase_names``) also TAWSS, OSI, log10_RRT, ECAP and ``phase/<name>/U|p|WSS``;
+        ``wall_markers`` (null without markers) says how each marker's PCA treated non-finite
+        values (``non_finite_rule``, ``transforms``, and per marker its record of
+        :attr:`Atlas.wall_markers`).
     """
     first = next(iter(atlas.regression.values()), {})
+    markers = None
+    if atlas.wall_markers:
+        markers = {
+            "non_finite_rule": NON_FINITE_RULE,
+            "transforms": {f: MARKER_TRANSFORMS[f] for f in atlas.wall_markers if f in MARKER_TRANSFORMS},
+            "markers": atlas.wall_markers,
+        }
     return {
         "patients_included": list(atlas.patients),
         "patients_excluded": [
@@ -468,6 +623,9 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         ],
         "options": atlas.options,
         "field_sources": atlas.field_sources,
+        "flow_kind": atlas.flow_kind,
+        "phase_names": list(atlas.phase_names),
+        "wall_markers": markers,
         "time_average_errors": atlas.time_average_errors,
         "knots": atlas.alignment_report.get("knots"),
         "alignment": {

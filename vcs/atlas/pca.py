@@ -5,6 +5,20 @@
 |delta c(tau)| and radius change delta rho_w(tau, theta) (paper Fig. 7);
 :func:`top_variation_mask` marks where a flow mode varies most.
 
+The flow fields an atlas can have a PCA of (the names used in atlas.json, :func:`field_key` gives
+the array of ``fields.npz`` each one is made of):
+
+* every cohort: :data:`FLOW_FIELDS` ``U``, ``p``, ``WSS`` (a pulsatile cohort's are the time
+  averages over the kept cardiac cycles);
+* a pulsatile cohort, in addition: the wall markers :data:`WALL_MARKERS` ``TAWSS``, ``OSI``,
+  ``log10_RRT`` and ``ECAP`` (scalar (n_tau, n_theta) wall maps; the relative residence time is
+  analysed as its decimal logarithm, see :func:`flow_vector`), and per phase of its
+  ``phase_names`` the fields ``phase/<name>/U``, ``phase/<name>/p``, ``phase/<name>/WSS``
+  (:func:`phase_field`; vectors in the frame of the unprefixed ones).
+
+Only the wall markers may hold non-finite values (RRT diverges where OSI -> 0.5 or TAWSS -> 0);
+their PCA leaves those cells out (:meth:`PCA.from_data` with ``drop_non_finite``).
+
 Pure numpy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
 
@@ -26,6 +40,69 @@ if TYPE_CHECKING:
 FLOW_FIELDS = ("U", "p", "WSS")
 VECTOR_FIELDS = ("U", "WSS")
 SHAPE_BLOCKS = ("all", "wall", "centerline")
+#: Wall markers of a pulsatile cohort, one PCA each of its (n_tau, n_theta) wall map.
+WALL_MARKERS = ("TAWSS", "OSI", "log10_RRT", "ECAP")
+#: The quantities of each phase of a pulsatile cohort (``phase/<name>/<quantity>``).
+PHASE_QUANTITIES = ("U", "p", "WSS")
+#: Units of the fields' values as the PCAs see them (vector fields: of their components).
+FIELD_UNITS = {
+    "U": "m/s",
+    "p": "Pa",
+    "WSS": "Pa",
+    "TAWSS": "Pa",
+    "OSI": "1",
+    "log10_RRT": "log10(1/Pa)",
+    "ECAP": "1/Pa",
+}
+#: What the PCA of a wall marker analyses when it is not the ``fields.npz`` array as is.
+MARKER_TRANSFORMS = {
+    "log10_RRT": "log10 of RRT (1/Pa): RRT = 1 / ((1 - 2 OSI) TAWSS) spans decades and diverges as "
+    "OSI -> 0.5, so its raw values would let a few near-divergent cells carry the whole variance"
+}
+
+
+def phase_field(phase: str, quantity: str) -> str:
+    """Name of a phase field, ``phase/<phase>/<quantity>`` (as in ``fields.npz``)."""
+    return f"phase/{phase}/{quantity}"
+
+
+def field_quantity(name: str) -> str:
+    """The quantity of a flow field name: ``U`` of ``U`` and of ``phase/peak_systole/U``."""
+    return name.rsplit("/", 1)[-1]
+
+
+def field_phase(name: str) -> str | None:
+    """The phase of a phase field (``peak_systole`` of ``phase/peak_systole/U``), else None."""
+    parts = name.split("/")
+    return parts[1] if len(parts) == 3 and parts[0] == "phase" else None
+
+
+def is_vector_field(name: str) -> bool:
+    """Whether a flow field holds vectors (U, WSS and their phase fields)."""
+    return field_quantity(name) in VECTOR_FIELDS
+
+
+def field_slug(name: str) -> str:
+    """A flow field's name in file and array names: ``/`` -> ``_`` (``phase_peak_systole_U``)."""
+    return name.replace("/", "_")
+
+
+def field_key(name: str, frame: str = "vcs") -> str:
+    """The ``fields.npz`` array a flow field's PCA is made of.
+
+    ``U_vcs``/``WSS_vcs`` (and ``phase/<name>/U_vcs``, ...) for vector fields in the VCS frame,
+    ``RRT`` for ``log10_RRT``, the name itself otherwise.
+    """
+    if name == "log10_RRT":
+        return "RRT"
+    return f"{name}_vcs" if frame == "vcs" and is_vector_field(name) else name
+
+
+def pulsatile_fields(phase_names: Sequence[str]) -> tuple[str, ...]:
+    """The flow fields of a pulsatile cohort's atlas: :data:`FLOW_FIELDS` (time averages), the
+    :data:`WALL_MARKERS`, then :data:`PHASE_QUANTITIES` of each phase in order."""
+    phases = (phase_field(ph, q) for ph in phase_names for q in PHASE_QUANTITIES)
+    return (*FLOW_FIELDS, *WALL_MARKERS, *phases)
 
 
 def shape_matrix(models: Sequence[VesselModel], block: str = "all") -> np.ndarray:
@@ -72,14 +149,18 @@ class PCA:
     Attributes
     ----------
     mean : (d,) float
+        NaN outside ``support``.
     components : (k, d) float
-        Orthonormal modes, sign fixed so the largest-magnitude entry of each is positive.
+        Orthonormal modes, sign fixed so the largest-magnitude entry of each is positive; 0
+        outside ``support``.
     sigma : (k,) float
         Standard deviation of the scores along each mode (ddof = 1), units of the data.
     explained_variance_ratio : (k,) float
         Fraction of the total variance per mode.
     scores : (n, k) float
         Scores of the training samples, units of the data.
+    support : (d,) bool or None
+        The entries the PCA was fitted on (None: all); see :meth:`from_data` ``drop_non_finite``.
     """
 
     mean: np.ndarray
@@ -87,9 +168,10 @@ class PCA:
     sigma: np.ndarray
     explained_variance_ratio: np.ndarray
     scores: np.ndarray
+    support: np.ndarray | None = None
 
     @classmethod
-    def from_data(cls, X: ArrayLike, n_modes: int | None = None) -> PCA:
+    def from_data(cls, X: ArrayLike, n_modes: int | None = None, *, drop_non_finite: bool = False) -> PCA:
         """PCA by SVD of the centred data.
 
         Parameters
@@ -97,7 +179,12 @@ class PCA:
         X : (n, d) float
             n >= 2 samples.
         n_modes : int, optional
-            Modes kept; at most (and by default) min(n - 1, d).
+            Modes kept; at most (and by default) min(n - 1, d') with d' the entries used.
+        drop_non_finite : bool
+            Leave out the entries (columns) that are not finite in every sample: the PCA is that of
+            the other columns, its ``support``; outside it the mean is NaN (so are samples rebuilt
+            from it) and the modes are 0. Without it, a non-finite value is an error (never
+            replaced by a number).
 
         Returns
         -------
@@ -106,11 +193,27 @@ class PCA:
         Raises
         ------
         VCSInputError
-            ``X`` is not 2-D or has fewer than 2 samples.
+            ``X`` is not 2-D, has fewer than 2 samples, or holds non-finite values (all its columns
+            do, with ``drop_non_finite``).
         """
         X = np.asarray(X, float)
         if X.ndim != 2 or len(X) < 2:
             raise VCSInputError(f"PCA needs an (n >= 2, d) array, got shape {X.shape}")
+        keep = np.isfinite(X).all(axis=0)
+        if not keep.all():
+            if not drop_non_finite:
+                raise VCSInputError(
+                    f"PCA data has {int((~np.isfinite(X)).sum())} non-finite values "
+                    f"(in {int((~keep).sum())} of {X.shape[1]} columns)"
+                )
+            if not keep.any():
+                raise VCSInputError(f"PCA data has no column finite in all {len(X)} samples")
+            part = cls.from_data(X[:, keep], n_modes)
+            mean = np.full(X.shape[1], np.nan)
+            mean[keep] = part.mean
+            comps = np.zeros((part.n_modes, X.shape[1]))
+            comps[:, keep] = part.components
+            return cls(mean, comps, part.sigma, part.explained_variance_ratio, part.scores, keep)
         n = len(X)
         mean = X.mean(axis=0)
         U, S, Vt = np.linalg.svd(X - mean, full_matrices=False)
@@ -140,8 +243,13 @@ class PCA:
         Returns
         -------
         (n, k) or (k,) float
+            From the ``support`` entries only (the others have no mean).
         """
-        return (np.asarray(X, float) - self.mean) @ self.components.T
+        X = np.asarray(X, float)
+        if self.support is None:
+            return (X - self.mean) @ self.components.T
+        s = self.support
+        return (X[..., s] - self.mean[s]) @ self.components[:, s].T
 
     def inverse_transform(self, scores: ArrayLike) -> NDArray[np.float64]:
         """Samples rebuilt from scores: mean + scores @ components.
@@ -168,11 +276,12 @@ class PCA:
         scores : (k,) float
         reconstruction : (d,) float
         error : float
-            |x - reconstruction| (same units as x).
+            |x - reconstruction| (same units as x) over the ``support`` entries.
         """
         s = self.transform(x)
         xh = self.inverse_transform(s)
-        return s, xh, float(np.linalg.norm(np.asarray(x, float) - xh))
+        r = np.asarray(x, float) - xh
+        return s, xh, float(np.linalg.norm(r if self.support is None else r[self.support]))
 
     def mode_sample(self, mode: int, n_sigma: float) -> NDArray[np.float64]:
         """The sample mean + n_sigma * sigma_m * u_m.
@@ -202,15 +311,19 @@ class PCA:
         -------
         dict
             ``{prefix}_mean`` (d,), ``{prefix}_components`` (k, d), ``{prefix}_sigma`` (k,),
-            ``{prefix}_explained_variance_ratio`` (k,), ``{prefix}_scores`` (n, k).
+            ``{prefix}_explained_variance_ratio`` (k,), ``{prefix}_scores`` (n, k), and
+            ``{prefix}_support`` (d,) bool when the PCA left entries out.
         """
-        return {
+        out = {
             f"{prefix}_mean": self.mean,
             f"{prefix}_components": self.components,
             f"{prefix}_sigma": self.sigma,
             f"{prefix}_explained_variance_ratio": self.explained_variance_ratio,
             f"{prefix}_scores": self.scores,
         }
+        if self.support is not None:
+            out[f"{prefix}_support"] = self.support
+        return out
 
 
 def mode_deformation(
@@ -269,15 +382,22 @@ def flow_vector(fields: Mapping[str, ArrayLike], name: str, *, frame: str = "vcs
     ``frame="vcs"`` (default) uses the vector components in the local VCS frame
     (``U_vcs``/``WSS_vcs``: along t, e_theta, e_rho), which are invariant to the rigid alignment
     and comparable across patients; ``"cartesian"`` uses ``U``/``WSS`` as sampled. Pressures are
-    taken in Pa (``p``).
+    taken in Pa (``p``). Phase fields (``phase/<name>/U``, ...) are read like the unprefixed ones
+    (:func:`field_key`).
+
+    ``log10_RRT`` is the decimal logarithm of ``RRT`` (1/Pa; :data:`MARKER_TRANSFORMS` says why);
+    where RRT is not finite or not positive (OSI = 0.5 or TAWSS = 0: no residence time to speak
+    of) the value is NaN, never a number standing in for it: the marker's PCA leaves such cells
+    out (:meth:`PCA.from_data` ``drop_non_finite``). The other fields are returned as stored.
 
     Parameters
     ----------
     fields : mapping of str to array
         One patient's resampled arrays (``fields.npz``): e.g. ``U_vcs`` (n_tau, n_theta, n_rho, 3)
-        m/s, ``p`` (n_tau, n_theta, n_rho) Pa, ``WSS_vcs`` (n_tau, n_theta, 3) Pa.
+        m/s, ``p`` (n_tau, n_theta, n_rho) Pa, ``WSS_vcs`` (n_tau, n_theta, 3) Pa, and of a
+        pulsatile case ``TAWSS``, ``OSI``, ``RRT``, ``ECAP`` (n_tau, n_theta) and the phase fields.
     name : str
-        ``"U"``, ``"p"`` or ``"WSS"``.
+        ``"U"``, ``"p"``, ``"WSS"``, a wall marker of :data:`WALL_MARKERS` or a phase field.
     frame : {"vcs", "cartesian"}
 
     Returns
@@ -290,12 +410,16 @@ def flow_vector(fields: Mapping[str, ArrayLike], name: str, *, frame: str = "vcs
     VCSInputError
         ``fields`` lacks the array.
     """
-    key = f"{name}_vcs" if frame == "vcs" and name in ("U", "WSS") else name
+    key = field_key(name, frame)
     if key not in fields:
         raise VCSInputError(
             f"the resampled fields have no '{key}'; resample the case with vcs.cfd.resample.sample_case"
         )
-    return np.asarray(fields[key], float).ravel()
+    a = np.asarray(fields[key], float).ravel()
+    if name == "log10_RRT":
+        ok = np.isfinite(a) & (a > 0)
+        a = np.where(ok, np.log10(np.where(ok, a, 1.0)), np.nan)
+    return a
 
 
 def top_variation_mask(

@@ -15,14 +15,21 @@ and its ``png_dir`` (PNG, default ``out_dir/figures``; each figure is written on
   ``centerline_displacement`` (|delta c(tau)|), ``radius_change`` (delta rho_w), ``displacement``;
 * ``shape_mean.png``: the mean wall radius map and cross-sections near the inlet;
 * ``shape_mode{k}_deformation.png``: paper Fig. 7 (|delta c| vs tau, delta rho_w over (tau, theta));
-* ``explained_variance.png``: shape and flow explained variance per mode;
-* ``flow_mean.vtu``: mean U, p, WSS on the mean shape's grid; per field and mode the mode's
-  +-2 sigma fields and a ``{field}_mode{k}_top20`` mask (cells in the top 20 % of the variation);
-* ``flow_{field}_mode{k}.png``: theta-clipped lumen views (paper Figs. 8-9): mean - 2 sigma, mean,
-  mean + 2 sigma, and the top-20 % region. The three field panels share one colour scale, from the
-  2nd to the 98th percentile of their values (:func:`robust_limits`: one outlying patient, whose
-  mode sends a few cells far off, does not darken every panel); values beyond are drawn at the
-  ends of the scale.
+* ``explained_variance.png``: shape and flow explained variance per mode (a pulsatile cohort's in
+  panels: shape and cycle averages, wall markers, one per phase);
+* ``flow_mean.vtu``: the mean of every flow field (U, p, WSS; of a pulsatile cohort also TAWSS,
+  OSI, log10_RRT, ECAP and the phase fields) on the mean shape's grid; per field and mode the
+  mode's +-2 sigma fields and a ``{field}_mode{k}_top20`` mask (cells in the top 20 % of the
+  variation). Array names use :func:`vcs.atlas.pca.field_slug` (``phase_peak_systole_U_mean``);
+  wall fields are on the rho_n = 1 layer (zero inside); a wall marker's cells left out of its PCA
+  are NaN;
+* ``flow_{field}_mode{k}.png`` (field slug, e.g. ``flow_phase_peak_systole_U_mode1.png``):
+  theta-clipped lumen views (paper Figs. 8-9) of U, p, WSS and the phase fields, and (tau, theta)
+  maps of the wall markers (:func:`wall_map_png`, e.g. ``flow_TAWSS_mode1.png``): mean - 2 sigma,
+  mean, mean + 2 sigma, and the top-20 % region. The three field panels share one colour scale,
+  from the 2nd to the 98th percentile of their values (:func:`robust_limits`: one outlying
+  patient, whose mode sends a few cells far off, does not darken every panel); values beyond are
+  drawn at the ends of the scale.
 """
 
 from __future__ import annotations
@@ -34,7 +41,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from vcs.atlas.cohort import Atlas
-from vcs.atlas.pca import PCA, VECTOR_FIELDS, mode_deformation, top_variation_mask
+from vcs.atlas.pca import (
+    PCA,
+    WALL_MARKERS,
+    field_phase,
+    field_quantity,
+    field_slug,
+    is_vector_field,
+    mode_deformation,
+    top_variation_mask,
+)
 from vcs.atlas.procrustes import TWO_PI
 from vcs.grid import from_vcs_components, grid_points, grid_to_vtk, local_frame
 
@@ -331,8 +347,35 @@ def deformation_png(d: dict[str, Any], path: PathLike, *, title: str = "") -> No
     plt.close(fig)
 
 
+def variance_groups(atlas: Atlas) -> list[tuple[str, dict[str, np.ndarray]]]:
+    """The panels of :func:`explained_variance_png`: (title, {series: explained variance ratio}).
+
+    One untitled panel of the shape and every flow PCA for a steady cohort; for a pulsatile one,
+    the shape with the cycle-averaged U, p, WSS (and any other field), the wall markers, and one
+    panel per phase (its U, p, WSS).
+    """
+    flow = {f: p.explained_variance_ratio for f, p in atlas.flow.items()}
+    main = {"shape": atlas.shape.explained_variance_ratio}
+    if atlas.flow_kind != "pulsatile":
+        return [("", {**main, **flow})]
+    markers = {f: v for f, v in flow.items() if f in WALL_MARKERS}
+    phases: dict[str, dict[str, np.ndarray]] = {}
+    for f, v in flow.items():
+        phase = field_phase(f)
+        if phase is not None:
+            phases.setdefault(phase, {})[field_quantity(f)] = v
+        elif f not in markers:
+            main[f] = v
+    groups = [("shape and cycle-averaged flow", main)]
+    if markers:
+        groups.append(("wall markers", markers))
+    groups += [(f"phase {ph}", series) for ph, series in phases.items()]
+    return groups
+
+
 def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
-    """PNG bar chart of the explained variance (%) per mode of the shape PCA and each flow PCA.
+    """PNG bar chart of the explained variance (%) per mode of the shape PCA and each flow PCA,
+    in the panels of :func:`variance_groups`.
 
     Parameters
     ----------
@@ -341,18 +384,21 @@ def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
         Output PNG.
     """
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 3.5), dpi=110)
-    series = {
-        "shape": atlas.shape.explained_variance_ratio,
-        **{f: p.explained_variance_ratio for f, p in atlas.flow.items()},
-    }
-    w = 0.8 / len(series)
-    for i, (name, v) in enumerate(series.items()):
-        ax.bar(np.arange(1, len(v) + 1) + (i - (len(series) - 1) / 2) * w, 100 * v, w, label=name)
-    ax.set_xlabel("mode")
-    ax.set_ylabel("explained variance (%)")
-    ax.set_xticks(np.arange(1, atlas.shape.n_modes + 1))
-    ax.legend()
+    groups = variance_groups(atlas)
+    size = (6, 3.5) if len(groups) == 1 else (7, 0.5 + 2.6 * len(groups))
+    fig, axes = plt.subplots(len(groups), 1, figsize=size, dpi=110, squeeze=False)
+    for ax, (title, series) in zip(axes[:, 0], groups):
+        w = 0.8 / len(series)
+        for i, (name, v) in enumerate(series.items()):
+            ax.bar(np.arange(1, len(v) + 1) + (i - (len(series) - 1) / 2) * w, 100 * v, w, label=name)
+        ax.set_xlabel("mode")
+        ax.set_ylabel("explained variance (%)")
+        ax.set_xticks(np.arange(1, atlas.shape.n_modes + 1))
+        if title:  # the panels of a pulsatile cohort: legend beside the bars, which reach 100 %
+            ax.set_title(title, fontsize=9)
+            ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        else:
+            ax.legend()
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -363,7 +409,7 @@ def explained_variance_png(atlas: Atlas, path: PathLike) -> None:
 # ---------------------------------------------------------------------------------------------
 def _field_cartesian(vec: np.ndarray, name: str, shape: tuple, frame: np.ndarray, flow_frame: str) -> np.ndarray:
     a = np.asarray(vec).reshape(shape)
-    if name != "p" and flow_frame == "vcs":
+    if is_vector_field(name) and flow_frame == "vcs":
         a = from_vcs_components(a, frame)
     return a
 
@@ -376,8 +422,9 @@ def _scalar(a: np.ndarray) -> np.ndarray:
 def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.UnstructuredGrid, dict[str, Any]]:
     """The flow atlas on the mean shape's (tau, theta, rho_n) grid as a pyvista UnstructuredGrid (mm).
 
-    Surface fields (WSS, (n_tau, n_theta, 3)) are put on the rho_n = 1 layer (zero inside).
-    Vector fields are Cartesian (converted from VCS components when the atlas used them).
+    Surface fields (WSS (n_tau, n_theta, 3), the wall markers (n_tau, n_theta)) are put on the
+    rho_n = 1 layer (zero inside). Vector fields are Cartesian (converted from VCS components when
+    the atlas used them).
 
     Parameters
     ----------
@@ -390,7 +437,8 @@ def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.Unstructur
     -------
     grid : pyvista.UnstructuredGrid
         Point data ``{field}_mean``, ``{field}_mode{k}_plus2sigma``, ``{field}_mode{k}_minus2sigma``,
-        ``{field}_mode{k}_top20`` (uint8 mask) and ``rho_n``.
+        ``{field}_mode{k}_top20`` (uint8 mask) and ``rho_n``, ``{field}`` the field's
+        :func:`vcs.atlas.pca.field_slug`.
     info : dict
         ``points`` ((n_tau, n_theta, n_rho, 3) float, mm) and ``panels``: {field: {"mean": array,
         "modes": [(minus, plus, top20 mask) per mode]}}, arrays of shape (n_tau, n_theta, n_rho[, 3]).
@@ -411,21 +459,22 @@ def flow_grid(atlas: Atlas, mean_model: VesselModel) -> tuple[pyvista.Unstructur
                 return full
             return a
 
+        name = field_slug(f)
         mean = vol(_field_cartesian(pca.mean, f, shape, frame, ff))
-        arrays[f"{f}_mean"] = mean
+        arrays[f"{name}_mean"] = mean
         modes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         panels[f] = {"mean": mean, "modes": modes}
         for k in range(pca.n_modes):
             plus = vol(_field_cartesian(pca.mode_sample(k, 2.0), f, shape, frame, ff))
             minus = vol(_field_cartesian(pca.mode_sample(k, -2.0), f, shape, frame, ff))
-            mask = top_variation_mask(pca, k, shape, vector=f in VECTOR_FIELDS)
+            mask = top_variation_mask(pca, k, shape, vector=is_vector_field(f))
             if mask.shape != pts.shape[:3]:
                 full = np.zeros((*mask.shape, n_rho), bool)
                 full[:, :, -1] = mask
                 mask = full
-            arrays[f"{f}_mode{k + 1}_plus2sigma"] = plus
-            arrays[f"{f}_mode{k + 1}_minus2sigma"] = minus
-            arrays[f"{f}_mode{k + 1}_top20"] = mask.astype(np.uint8)
+            arrays[f"{name}_mode{k + 1}_plus2sigma"] = plus
+            arrays[f"{name}_mode{k + 1}_minus2sigma"] = minus
+            arrays[f"{name}_mode{k + 1}_top20"] = mask.astype(np.uint8)
             modes.append((minus, plus, mask))
     arrays["rho_n"] = np.broadcast_to(rho_n, pts.shape[:3])
     return grid_to_vtk(pts, arrays), {"points": pts, "panels": panels}
@@ -679,10 +728,125 @@ def clipped_view_figure(
     return fig
 
 
+_LABELS = {
+    "U": "|U| (m/s)",
+    "p": "p (Pa)",
+    "WSS": "|WSS| (Pa)",
+    "TAWSS": "TAWSS (Pa)",
+    "OSI": "OSI",
+    "log10_RRT": "log10 RRT (RRT in 1/Pa)",
+    "ECAP": "ECAP (1/Pa)",
+}
+
+
+def field_title(name: str) -> str:
+    """A flow field's name in panel titles: ``U``, ``TAWSS``, ``U at peak_systole``."""
+    phase = field_phase(name)
+    return f"{field_quantity(name)} at {phase}" if phase else name
+
+
+def field_label(name: str) -> str:
+    """A flow field's colour-bar title with its unit: ``|U| (m/s)``, ``|U| (m/s) at peak_systole``."""
+    phase = field_phase(name)
+    label = _LABELS.get(field_quantity(name), field_quantity(name))
+    return f"{label} at {phase}" if phase else label
+
+
+def wall_map_figure(
+    tau: np.ndarray,
+    theta: np.ndarray,
+    panels: list[tuple[str, np.ndarray, str]],
+    *,
+    label: str,
+    clim: tuple[float, float],
+    note: str = "",
+) -> Any:
+    """matplotlib Figure of a scalar wall field as (tau, theta) maps, one per panel.
+
+    The panels whose colour map is the first panel's share ``clim`` and one colour bar titled
+    ``label`` (at most 5 ticks); the others (the top-20 % mask) are drawn on (0, 1) without one.
+    NaN values (wall cells left out of a marker's PCA, :data:`vcs.atlas.cohort.NON_FINITE_RULE`)
+    are drawn grey, and the note (a small line above the panels) says so.
+
+    Parameters
+    ----------
+    tau : (n_tau,) float
+    theta : (n_theta,) float, rad
+    panels : list of (title, (n_tau, n_theta) float array, colour map name)
+    label : str
+        Name (with units) of the values: the colour bar's title.
+    clim : (float, float)
+        Colour limits of the shared panels.
+    note : str
+        A small line above the panels (the figure's suptitle).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    plt = _plt()
+    fig, axes = plt.subplots(
+        1,
+        len(panels),
+        figsize=(3.2 * len(panels) + 1.2, 3.4),
+        dpi=110,
+        squeeze=False,
+        sharey=True,
+        layout="constrained",
+    )
+    shared_axes, image, left_out = [], None, False
+    extent = (float(tau[0]), float(tau[-1]), 0.0, TWO_PI)
+    for ax, (title, values, cmap) in zip(axes[0], panels):
+        v = np.asarray(values, float)
+        shared = cmap == panels[0][2]
+        left_out |= shared and bool(np.isnan(v).any())
+        lim = clim if shared else (0.0, 1.0)
+        cm = plt.get_cmap(cmap).with_extremes(bad="0.7")
+        im = ax.imshow(v.T, origin="lower", aspect="auto", cmap=cm, extent=extent, vmin=lim[0], vmax=lim[1])
+        if shared:
+            shared_axes.append(ax)
+            image = im
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("tau")
+    axes[0][0].set_ylabel("theta (rad)")
+    if image is not None:
+        cb = fig.colorbar(image, ax=shared_axes, label=label, location="bottom", shrink=0.6, aspect=40)
+        cb.locator = MaxNLocator(5)
+        cb.update_ticks()
+    if left_out:
+        note = (note + "; " if note else "") + "grey: cells left out of the PCA (not finite for some patient)"
+    if note:  # above the panels: constrained layout makes room for it (a figure text would overlap the bar)
+        fig.suptitle(note, fontsize=7, x=0.01, ha="left")
+    return fig
+
+
+def wall_map_png(
+    tau: np.ndarray,
+    theta: np.ndarray,
+    panels: list[tuple[str, np.ndarray, str]],
+    path: PathLike,
+    *,
+    label: str,
+    clim: tuple[float, float] | None = None,
+    note: str = "",
+) -> None:
+    """PNG of :func:`wall_map_figure` (``clim`` default: :func:`robust_limits` of the shared panels)."""
+    if clim is None:
+        clim = robust_limits([v for _, v, c in panels if c == panels[0][2]])
+    plt = _plt()
+    fig = wall_map_figure(tau, theta, panels, label=label, clim=clim, note=note)
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def write_flow_files(
     atlas: Atlas, mean_model: VesselModel, out_dir: PathLike, *, png_dir: PathLike | None = None
 ) -> dict[str, Any]:
-    """flow_mean.vtu (:func:`flow_grid`) and the clipped-view PNG of every field and mode.
+    """flow_mean.vtu (:func:`flow_grid`) and the PNG of every field and mode: a clipped lumen view
+    (:func:`clipped_view_png`), or for a scalar wall map (the wall markers) a (tau, theta) map
+    (:func:`wall_map_png`).
 
     Parameters
     ----------
@@ -697,10 +861,10 @@ def write_flow_files(
     Returns
     -------
     dict
-        {what: file name relative to ``out_dir``}: ``flow_mean`` and ``flow_{field}_mode{k}``,
-        plus (not files) ``renderer``: the sorted list of 3-D renderers used, and
-        ``colour_limits``: {figure key: [lo, hi]} of the shared panels (:func:`robust_limits`; for
-        a wall field, of its values on the wall).
+        {what: file name relative to ``out_dir``}: ``flow_mean`` and ``flow_{field}_mode{k}``
+        (``{field}`` the :func:`vcs.atlas.pca.field_slug`), plus (not files) ``renderer``: the
+        sorted list of 3-D renderers used, and ``colour_limits``: {figure key: [lo, hi]} of the
+        shared panels (:func:`robust_limits`; for a wall field, of its values on the wall).
     """
     out = Path(out_dir)
     pngs = Path(png_dir) if png_dir is not None else out
@@ -715,26 +879,33 @@ def write_flow_files(
     limits: dict[str, list[float]] = {}
     lo_pc, hi_pc = COLOUR_PERCENTILES
     note = f"colour scale: {lo_pc:g}-{hi_pc:g} % of the 3 panels' values"
+    tau = atlas.grid["tau"]
     for f, d in info["panels"].items():
-        cmap = "coolwarm" if f == "p" else "viridis"
-        label = {"U": "|U| (m/s)", "p": "p (Pa)", "WSS": "|WSS| (Pa)"}.get(f, f)
-        on_wall = len(atlas.field_shapes[f]) - (1 if f in VECTOR_FIELDS else 0) == 2  # (n_tau, n_theta[, 3])
+        cmap = "coolwarm" if field_quantity(f) == "p" else "viridis"
+        label, title = field_label(f), field_title(f)
+        mask_title = "" if field_phase(f) else title  # a phase's name makes the title overflow the panel
+        shape = atlas.field_shapes[f]
+        on_wall = len(shape) - (1 if is_vector_field(f) else 0) == 2  # (n_tau, n_theta[, 3])
         for k, (minus, plus, mask) in enumerate(d["modes"]):
             panels = [
-                (f"{f} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
-                (f"{f} mean", _scalar(d["mean"]), cmap),
-                (f"{f} mean + 2 sigma (mode {k + 1})", _scalar(plus), cmap),
-                (f"{f} mode {k + 1}: top 20 % variation (red)", mask.astype(float), "Reds"),
+                (f"{title} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
+                (f"{title} mean", _scalar(d["mean"]), cmap),
+                (f"{title} mean + 2 sigma (mode {k + 1})", _scalar(plus), cmap),
+                (f"{mask_title} mode {k + 1}: top 20 % variation (red)".lstrip(), mask.astype(float), "Reds"),
             ]
             values = [v[:, :, -1] if on_wall else v for _, v, _ in panels[:3]]  # inside a wall field: zeros
             clim = robust_limits(values)
-            key = f"flow_{f}_mode{k + 1}"
+            key = f"flow_{field_slug(f)}_mode{k + 1}"
             png = pngs / f"{key}.png"
-            renderers.add(
-                clipped_view_png(
-                    info["points"], theta, panels, png, label=label, clim=clim, view_normal=view, note=note
+            if len(shape) == 2:  # a scalar wall map (the wall markers): drawn over (tau, theta)
+                maps = [(t, v[:, :, -1], c) for t, v, c in panels]
+                wall_map_png(tau, theta, maps, png, label=label, clim=clim, note=note)
+            else:
+                renderers.add(
+                    clipped_view_png(
+                        info["points"], theta, panels, png, label=label, clim=clim, view_normal=view, note=note
+                    )
                 )
-            )
             files[key] = _relative(png, out)
             limits[key] = [clim[0], clim[1]]
     files["renderer"] = sorted(renderers)
