@@ -2,7 +2,9 @@
 status and fields. A patient that failed at any stage (its fit outputs are a failure record,
 its status.json says why, or its fields are a placeholder) is listed in atlas.json under
 patients_excluded with the stage and the reason; the atlas is built from the others. The PNGs go
-to the rule's figures/ directory (once), the VTP/VTU files beside atlas.json."""
+to the rule's figures/ directory (once), the VTP/VTU files beside atlas.json. A pulsatile cohort's
+fields.npz (cycle averages, wall markers, phase fields) are passed as they are: build_atlas decides
+which PCAs the cohort gets, and refuses a cohort that mixes pulsatile and steady patients."""
 
 import json
 import sys
@@ -38,9 +40,28 @@ def main(smk):
     )
     for pid, reason in atlas.excluded.items():
         log.warning("excluded %s (%s): %s", pid, atlas.exclusion_stages.get(pid), reason)
-    for field, r in atlas.regression.items():
-        if r["status"] != "ok":
-            log.warning("shape -> flow regression of %s: %s (%s)", field, r["status"], r["status_reason"])
+    weak = [field for field, r in atlas.regression.items() if r["status"] != "ok"]
+    if weak:  # one status for the cohort: one line, however many flow PCAs (a pulsatile atlas has 16)
+        r = atlas.regression[weak[0]]
+        log.warning("shape -> flow regression of %s: %s (%s)", ", ".join(weak), r["status"], r["status_reason"])
+    log.info(
+        "flow: %s (%d PCAs: %s)%s",
+        atlas.flow_kind,
+        len(atlas.flow),
+        ", ".join(atlas.flow),
+        f", phases {', '.join(atlas.phase_names)}" if atlas.phase_names else "",
+    )
+    for marker, rec in atlas.wall_markers.items():
+        if rec.get("excluded"):
+            log.warning("wall marker %s has no PCA: %s", marker, rec["excluded"])
+        elif rec["n_left_out"]:
+            log.warning(
+                "wall marker %s: %d of %d wall cells left out of its PCA (not finite for %s)",
+                marker,
+                rec["n_left_out"],
+                rec["n_cells"],
+                ", ".join(rec["non_finite_by_patient"]),
+            )
     knots = atlas.alignment_report.get("knots") or {}
     log.info(
         "cohort knots L=%s K=%s R=%s (fitted L: %s)",
