@@ -438,7 +438,8 @@ def top_variation_mask(
     vector : bool
         The trailing axis of ``field_shape`` holds 3 components; the norm is taken over it.
     fraction : float
-        Fraction of the cells marked, in (0, 1].
+        Fraction of the cells marked, in (0, 1]; of the cells in the PCA's ``support`` when it left
+        some out (those are never marked).
 
     Returns
     -------
@@ -448,4 +449,8 @@ def top_variation_mask(
     u = np.abs(pca.components[mode] * pca.sigma[mode]).reshape(field_shape)
     if vector:
         u = np.linalg.norm(u, axis=-1)
-    return u >= np.quantile(u, 1.0 - fraction)
+    if pca.support is None:
+        return u >= np.quantile(u, 1.0 - fraction)
+    support = pca.support.reshape(field_shape)
+    inside = support.all(axis=-1) if vector else support
+    return inside & (u >= np.quantile(u[inside], 1.0 - fraction))
