@@ -24,7 +24,7 @@ average), :mod:`vcs.cfd.status` (collecting ``status.json``),
 
 from vcs.cfd.case import render_case
 from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, detect_openfoam
-from vcs.cfd.resample import load_fields, read_case, sample_case, write_fields
+from vcs.cfd.resample import load_fields, read_case, sample_case, sample_pulsatile, write_fields
 from vcs.cfd.run import run_case
 
 __all__ = [
@@ -36,5 +36,6 @@ __all__ = [
     "render_case",
     "run_case",
     "sample_case",
+    "sample_pulsatile",
     "write_fields",
 ]

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from vcs.vessel import VesselModel
 
 #: per-patient values render_case accepts (SI units), e.g. from the patients sheet
-PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area")
+PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area", "waveform")
 
 STL_NAME = "vessel.stl"
 CASE_JSON = "vcsflow_case.json"
@@ -247,6 +247,9 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "max_delta_t": None,
         "jet_region": state.get("jet_region"),
         "inlet_values": None,
+        "waveform": state.get("waveform") is not None,  # pulsatile: the mapped inlet (vcs.cfd.pulsatile)
+        "pulsatile": cfd.get("pulsatile") or {},
+        "continue_average": False,
     }
     ctx.update(extra)
     return ctx
@@ -284,6 +287,11 @@ def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
             continue
         if k == "cell_size":
             out[k] = cell_size_value(v, "the patient's cell size")
+            continue
+        if k == "waveform":  # the patient's own inflow waveform (a CSV path), checked when loaded
+            if not isinstance(v, (str, Path)):
+                raise VCSInputError(f"the patient's inflow waveform must be the path of a CSV file, not {v!r}")
+            out[k] = str(v)
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
             raise VCSInputError(f"the patient's {k} must be a positive number (SI units), not {v!r}")
@@ -409,7 +417,10 @@ def render_case(
 
     # inflow: the patient's, or the config's (fixed or scaled by the inlet area)
     inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
-    inflow = choose_inflow(cfd["inlet"], inlet_area, patient={k2: own[k2] for k2 in own if k2 != "cell_size"})
+    inflow = choose_inflow(
+        cfd["inlet"], inlet_area, patient={k2: own[k2] for k2 in own if k2 not in ("cell_size", "waveform")}
+    )
+    waveform = applied_waveform(cfd["inlet"], inflow, own.get("waveform"), inlet_area)
     d_in = 2.0 * np.sqrt(inlet_area / np.pi)
     inflow["inlet_reynolds"] = inflow["mean_inlet_velocity_m_s"] * d_in / float(cfd["physics"]["nu"])
     cfd["inlet"]["flow_rate"] = inflow["flow_rate_m3_s"]
@@ -489,6 +500,7 @@ def render_case(
             "min_patch_faces": int(m["min_patch_faces"]),
         },
         "inflow": inflow,
+        "waveform": waveform,
     }
     case_dir.mkdir(parents=True, exist_ok=True)
     geo = case_dir / fl["geometry_dir"]
@@ -498,6 +510,70 @@ def render_case(
     state["files"] = list(fl["files"]) + [f"{fl['geometry_dir']}/{STL_NAME}"]
     (case_dir / CASE_JSON).write_text(json.dumps(state, indent=2))
     return state
+
+
+# --------------------------------------------------------------------------- inflow waveform
+
+
+def applied_waveform(
+    inlet: dict[str, Any], inflow: dict[str, Any], own: str | None, inlet_area: float
+) -> dict[str, Any] | None:
+    """The inflow waveform a patient gets (None: steady), and ``inflow`` updated to say so.
+
+    The waveform is the patient's own (``inflow_waveform`` of the sheet: applied as given) or
+    ``cfd.inlet.waveform`` scaled as the steady flow would be (:func:`vcs.cfd.sizing.choose_inflow`):
+    by the inlet-area factor (``scaling: scaled_by_inlet_area``; the waveform's mean takes the place
+    of the config's flow rate), or to the patient's own mean flow (sheet ``flow_rate_l_min``, or
+    velocity x valve area). ``inflow`` then holds the applied mean flow rate and a ``waveform``
+    summary (:meth:`vcs.cfd.waveform.Waveform.summary`, the file's SHA-256, the scale factor and why).
+
+    Returns
+    -------
+    dict or None
+        ``time_s``, ``flow_m3_s`` (as applied), ``period_s``, ``source``, ``sha256``,
+        ``scale_factor``, ``why``.
+    """
+    path = own or inlet.get("waveform")
+    if not path:
+        return None
+    import hashlib
+
+    from vcs.cfd.waveform import load_waveform
+
+    wf = load_waveform(path)
+    if own:
+        factor, why = 1.0, f"the patient's own waveform {Path(path).name} (patients sheet), as given"
+    elif inflow["source"] == "patient":
+        factor = inflow["flow_rate_m3_s"] / wf.mean_m3_s
+        why = f"{Path(path).name} scaled to the patient's mean flow {inflow['flow_rate_m3_s'] * 6e4:.4g} L/min"
+    else:
+        factor = float(inflow["scale_factor"])
+        why = f"{Path(path).name} (cfd.inlet.waveform)" + (
+            f" x {factor:.4g} ({inflow['scaling']}: inlet area / reference_inlet_area, capped at max_scale)"
+            if inflow["scaling"] == "scaled_by_inlet_area"
+            else ", unscaled"
+        )
+    applied = wf.scaled(factor)
+    q = applied.mean_m3_s
+    inflow.update(
+        {
+            "flow_rate_m3_s": q,
+            "flow_rate_l_min": q * 6e4,
+            "mean_inlet_velocity_m_s": q / inlet_area,
+            "why": why + f": mean {q * 6e4:.4g} L/min",
+            "waveform": applied.summary()
+            | {"scale_factor": factor, "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()},
+        }
+    )
+    return {
+        "time_s": [float(x) for x in applied.time_s],
+        "flow_m3_s": [float(x) for x in applied.flow_m3_s],
+        "period_s": applied.period_s,
+        "source": str(Path(path).resolve()),
+        "sha256": inflow["waveform"]["sha256"],
+        "scale_factor": factor,
+        "why": why,
+    }
 
 
 # --------------------------------------------------------------------------- inlet profile

@@ -80,6 +80,23 @@ DEFAULTS: dict[str, Any] = {
         "reference_inlet_area": 4.909e-4,  # [m2] inlet area at which Q applies unscaled (25 mm diameter)
         "max_scale": 1.0,  # largest scale factor (1: a dilated root gets no more than Q)
         "centre": None,  # jet centre [x, y, z]; None = area centroid of the inlet patch
+        # pulsatile flow: a CSV of one cardiac cycle (time_s,flow_rate_l_min), scaled as the flow
+        # above (its mean takes the place of Q); None = steady (vcs.cfd.waveform, vcs.cfd.pulsatile)
+        "waveform": None,
+    },
+    "pulsatile": {  # used when inlet.waveform (or the patient's inflow_waveform) is set
+        "profile": "womersley",  # womersley | parabolic | plug, mapped to the inlet's shape
+        "harmonics": 20,  # Fourier harmonics of the Womersley profile
+        "samples_per_cycle": 100,  # instants per cycle of the inlet boundary data (linear between)
+        "cycles": 3,  # cycles run at least ...
+        "discard_cycles": 1,  # ... of which the first are wash-in from rest (not averaged)
+        "max_cycles": 6,  # one more cycle while not periodic, up to this; then not converged
+        "periodicity_tolerance": 0.02,  # cycle-to-cycle change of dp and flow waveforms and TAWSS map
+        "phases": ["peak_systole", "end_systole", "mid_diastole"],  # instantaneous fields written
+        "max_co": 1.0,  # Courant number limit of the adjustable time step
+        "min_steps_per_cycle": 200,  # largest time step = period / this
+        "outer_correctors": 1,  # PIMPLE outer correctors (1: PISO-like)
+        "probes": [],  # points [x, y, z] m where U and p are recorded at every time step
     },
     "solver": {
         "tolerance": 1.0e-5,  # SIMPLE residualControl (initial residuals of p and U)
@@ -131,6 +148,7 @@ DEFAULTS: dict[str, Any] = {
 
 # the words a config may put into an OpenFOAM dictionary (everything else there is a number)
 INLET_TYPES = ("jet", "uniform", "parabolic")
+PULSATILE_PROFILES = ("womersley", "parabolic", "plug")
 INFLOW_SCALINGS = ("fixed", "scaled_by_inlet_area")
 DIV_SCHEMES = ("upwind", "linearUpwind", "LUST", "limitedLinearV")  # div(phi,U), see fvSchemes
 FALLBACKS = ("none", "transient")
@@ -303,6 +321,7 @@ def check_cfd(cfd: dict[str, Any]) -> None:
         )
     if not isinstance((cfd["solver"].get("plateau") or {}).get("early_stop", False), bool):
         raise VCSInputError("cfd.solver.plateau.early_stop must be true or false")
+    _check_pulsatile(cfd)
     _number(cfd, "mesh.layers", 0, 20)
     _number(cfd, "mesh.max_boundary_skewness", 0.0, 100.0, lo_open=True)
     _number(cfd, "mesh.jet_refinement.cells_across", 1, 100)
@@ -310,6 +329,51 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _number(cfd, "mesh.jet_refinement.radius", 1.0, 20.0)
     if not isinstance(cfd["mesh"]["jet_refinement"].get("enabled"), bool):
         raise VCSInputError("cfd.mesh.jet_refinement.enabled must be true or false")
+
+
+def _whole(cfd: dict[str, Any], dotted: str, lo: int, hi: int) -> int:
+    """A whole-number parameter in [lo, hi] (one-line VCSInputError otherwise)."""
+    node: Any = cfd
+    for part in dotted.split("."):
+        node = node[part]
+    if not (isinstance(node, int) and not isinstance(node, bool) and lo <= node <= hi):
+        raise VCSInputError(f"cfd.{dotted} must be a whole number in [{lo}, {hi}], not {node!r}")
+    return int(node)
+
+
+def _check_pulsatile(cfd: dict[str, Any]) -> None:
+    """The ``cfd.pulsatile`` parameters (see :func:`check_cfd`)."""
+    _word(cfd, "pulsatile.profile", PULSATILE_PROFILES)
+    _whole(cfd, "pulsatile.harmonics", 1, 200)
+    _whole(cfd, "pulsatile.samples_per_cycle", 20, 10000)
+    cycles = _whole(cfd, "pulsatile.cycles", 2, 100)
+    discard = _whole(cfd, "pulsatile.discard_cycles", 0, 99)
+    max_cycles = _whole(cfd, "pulsatile.max_cycles", 2, 1000)
+    if discard >= cycles:
+        raise VCSInputError(
+            f"cfd.pulsatile.discard_cycles ({discard}) must be below cycles ({cycles}): at least one cycle is kept"
+        )
+    if max_cycles < cycles:
+        raise VCSInputError(f"cfd.pulsatile.max_cycles ({max_cycles}) must not be below cycles ({cycles})")
+    _number(cfd, "pulsatile.periodicity_tolerance", 0.0, 1.0, lo_open=True)
+    _number(cfd, "pulsatile.max_co", 0.0, 5.0, lo_open=True)
+    _whole(cfd, "pulsatile.min_steps_per_cycle", 10, 1_000_000)
+    _whole(cfd, "pulsatile.outer_correctors", 1, 10)
+    phases = cfd["pulsatile"]["phases"]
+    known = ("peak_systole", "end_systole", "mid_diastole")
+    if not isinstance(phases, list) or any(ph not in known for ph in phases) or len(set(phases)) != len(phases):
+        raise VCSInputError(
+            f"cfd.pulsatile.phases must be a list of distinct names from {', '.join(known)}, not {phases!r}"
+        )
+    probes = cfd["pulsatile"]["probes"]
+    if not isinstance(probes, list) or not all(
+        isinstance(x, list) and len(x) == 3 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in x)
+        for x in probes
+    ):
+        raise VCSInputError(f"cfd.pulsatile.probes must be a list of points [x, y, z] (m), not {probes!r}")
+    wf = cfd["inlet"].get("waveform")
+    if wf is not None and not isinstance(wf, str):
+        raise VCSInputError(f"cfd.inlet.waveform must be null (steady) or the path of a CSV file, not {wf!r}")
 
 
 def template_dir() -> Path:

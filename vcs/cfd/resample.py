@@ -513,6 +513,113 @@ def sample_case(
     return out
 
 
+def _read_kept_means(case: Path, mean_times: list[str], wall_patch: str) -> tuple[Any, dict[str, Any]]:
+    """The internal mesh and patches of a pulsatile case with U, p, wallShearStress and TAWSS the
+    averages of the kept cycles' means (each cycle's end folder holds that cycle's means; cycles of
+    equal length, so their average is the kept window's time average), OSI from those averages."""
+    internal, patches, _ = read_case(case, time=float(mean_times[0]), wall_patch=wall_patch, fields="time_average")
+    names = ("U", "p", "wallShearStress", "TAWSS")
+    for t in mean_times[1:]:
+        other_int, other_pat, _ = read_case(case, time=float(t), wall_patch=wall_patch, fields="time_average")
+        for ds, ods in [(internal, other_int), *((patches[k], other_pat[k]) for k in patches if k in other_pat)]:
+            for data, odata in ((ds.cell_data, ods.cell_data), (ds.point_data, ods.point_data)):
+                for name in names:
+                    if name in data and name in odata:
+                        data[name] = np.asarray(data[name], float) + np.asarray(odata[name], float)
+    n = len(mean_times)
+    for ds in [internal, *patches.values()]:
+        for data in (ds.cell_data, ds.point_data):
+            for name in names:
+                if name in data:
+                    data[name] = np.asarray(data[name], float) / n
+    wall = patches[wall_patch]
+    for data in (wall.cell_data, wall.point_data):
+        if "TAWSS" in data and "wallShearStress" in data:
+            data["OSI"] = oscillatory_shear_index(np.asarray(data["wallShearStress"], float), np.asarray(data["TAWSS"]))
+    return internal, patches
+
+
+PHASE_KEYS = ("U", "U_vcs", "p", "p_kinematic", "WSS", "WSS_vcs", "WSS_kinematic")
+
+
+def sample_pulsatile(
+    case_dir: Path | str,
+    model: VesselModel,
+    pulsatile: dict[str, Any],
+    *,
+    n_tau: int = GRID_DEFAULTS["n_tau"],
+    n_theta: int = GRID_DEFAULTS["n_theta"],
+    n_rho: int = GRID_DEFAULTS["n_rho"],
+    rho_scale: float = 1e-3,
+    rho_density: float = 1060.0,
+    method: str = "mls",
+) -> dict[str, Any]:
+    """Sample a pulsatile case (:func:`vcs.cfd.pulsatile.pulsatile_solve`) on the patient's grid:
+    the time averages and wall markers over the kept cycles, and the phase fields.
+
+    The kept cycles' means (fieldAverage, accumulated at every time step) are averaged, then
+    sampled as a time-averaged case: U, p, WSS (the time-averaged vector) and, on the wall grid,
+    TAWSS = (1/T) int |tau| dt and OSI = 0.5 (1 - |int tau dt| / int |tau| dt) (:func:`read_case`);
+    from those RRT and ECAP (:func:`vcs.cfd.markers.rrt`, :func:`vcs.cfd.markers.ecap`). Every
+    phase instant of the last cycle is sampled from its instantaneous fields under
+    ``phase/<name>/<U|U_vcs|p|p_kinematic|WSS|WSS_vcs|WSS_kinematic>``.
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        The reconstructed case.
+    model : VesselModel
+        The vessel (mm) the case was built from.
+    pulsatile : dict
+        ``status["pulsatile"]`` of the case (``mean_times``, ``phases``).
+    n_tau, n_theta, n_rho, rho_scale, rho_density, method
+        As for :func:`sample_case`.
+
+    Returns
+    -------
+    dict of arrays
+        As :func:`sample_case`, with ``field_source`` "pulsatile", ``TAWSS`` (Pa), ``OSI`` (1),
+        ``RRT`` (1/Pa; inf where OSI = 0.5 or TAWSS = 0), ``ECAP`` (1/Pa) (n_tau, n_theta),
+        ``phase_names`` and the phase fields, ``phase_times`` (s, in the solver's time),
+        ``cycle_window`` (s, the kept cycles).
+    """
+    from vcs.cfd.markers import ecap, rrt
+
+    t0 = _time.perf_counter()
+    case = Path(case_dir)
+    kw: dict[str, Any] = {
+        "n_tau": n_tau,
+        "n_theta": n_theta,
+        "n_rho": n_rho,
+        "rho_scale": rho_scale,
+        "rho_density": rho_density,
+    }
+    internal, patches = _read_kept_means(case, list(pulsatile["mean_times"]), "wall")
+    t_read = _time.perf_counter()
+    out = sample_mesh(internal, patches, model, method=method, **kw)
+    if "TAWSS" not in out or "OSI" not in out:
+        raise VCSInputError(f"case '{case}': the kept cycles have no TAWSS/OSI on the wall (magWallShearStressMean)")
+    out["RRT"] = rrt(out["TAWSS"], out["OSI"])
+    out["ECAP"] = ecap(out["TAWSS"], out["OSI"])
+    names = list(pulsatile.get("phases") or {})
+    for name in names:
+        ph = pulsatile["phases"][name]
+        pi, pp, _ = read_case(case, time=float(ph["time_s"]), fields="instantaneous")
+        sampled = sample_mesh(pi, pp, model, method=method, **kw)
+        for key in PHASE_KEYS:
+            if key in sampled:
+                out[f"phase/{name}/{key}"] = sampled[key]
+    out["phase_names"] = np.array(names, dtype=str)
+    out["phase_times"] = np.array([float(pulsatile["phases"][n]["time_s"]) for n in names])
+    out["cycle_window"] = np.asarray(pulsatile["window"], float)
+    out["field_source"] = np.str_("pulsatile")
+    out["time"] = np.float64(pulsatile["window"][1])
+    out["read_time_s"] = np.float64(t_read - t0)
+    out["n_cells"] = np.int64(internal.n_cells)
+    out["sample_time_s"] = np.float64(_time.perf_counter() - t0)
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # Writing
 # ---------------------------------------------------------------------------------------------
@@ -576,7 +683,7 @@ def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path
             w = np.zeros(fields["U"].shape)
             w[:, :, n_rho - 1] = fields["WSS"]
             data["WSS"] = w
-        for name in ("TAWSS", "OSI"):
+        for name in ("TAWSS", "OSI", "RRT", "ECAP"):
             if name in fields:
                 s = np.zeros(fields["p"].shape)
                 s[:, :, n_rho - 1] = fields[name]

@@ -27,6 +27,7 @@ import numpy as np
 from vcs.cfd.case import CASE_JSON, inlet_profile, render_files
 from vcs.cfd.meshing import mesh_case, patch_check
 from vcs.cfd.openfoam import detect_openfoam
+from vcs.cfd.pulsatile import kept_wall_markers, pulsatile_plan, pulsatile_solve, write_cycle_table, write_inlet_data
 from vcs.cfd.status import _pyfoam_check, collect, finish
 from vcs.cfd.steady import STAGE_FILES, _criterion_text, plateau_pressure_change, steady_solve, volume_l2_ratio
 from vcs.cfd.transient import transient_fallback, transient_plan, window_statistics
@@ -107,6 +108,9 @@ def run_case(case_dir: Path | str, *, ranks: int | None = None) -> dict[str, Any
     try:
         run = _start(case_dir, state, status, installed)
         mesh_case(case_dir, state, status, run)
+        if state.get("waveform"):
+            _pulsatile(case_dir, state, status, run, ranks)
+            return finish(case_dir, status)
         prof = _inlet(case_dir, state, status)
         _decompose(case_dir, state, run)
         steady = steady_solve(case_dir, state, status, run, ranks, prof)
@@ -189,7 +193,8 @@ def _clean(case_dir: Path, state: dict[str, Any]) -> None:
     shutil.rmtree(case_dir / "constant" / "polyMesh", ignore_errors=True)
     for f in (case_dir / "logs").glob("log.*"):
         f.unlink()
-    for old in ("residuals.csv", "residuals.png", "transient.png"):
+    shutil.rmtree(case_dir / "constant" / "boundaryData", ignore_errors=True)
+    for old in ("residuals.csv", "residuals.png", "transient.png", "pulsatile.png", "cycles.json"):
         (case_dir / old).unlink(missing_ok=True)
     render_files(case_dir, state, ["0/U", "0/p"])  # placeholder inlet until the mesh exists
 
@@ -206,6 +211,32 @@ def _inlet(case_dir: Path, state: dict[str, Any], status: dict[str, Any]) -> dic
     status["timings_s"]["inletProfile"] = round(time.perf_counter() - t0, 3)
     status["inlet"].update({k: v for k, v in prof.items() if k != "values"})
     return prof
+
+
+def _pulsatile(case_dir: Path, state: dict[str, Any], status: dict[str, Any], run: _Runner, ranks: int) -> None:
+    """Stages 3-6 of a pulsatile case (an inflow waveform): the inlet boundary data, [decomposePar],
+    whole cycles until periodic (:func:`vcs.cfd.pulsatile.pulsatile_solve`), [reconstructPar of the
+    kept folders], the flow rates and pressures over the kept cycles and their wall markers."""
+    t0 = time.perf_counter()
+    plan = pulsatile_plan(state)
+    try:
+        status["inlet"].update(write_inlet_data(case_dir, state, plan))
+    except Stop:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        raise Stop(f"inlet boundary data: {exc}") from exc
+    render_files(case_dir, state, ["0/U"])
+    status["timings_s"]["inletProfile"] = round(time.perf_counter() - t0, 3)
+    _decompose(case_dir, state, run)
+    pu = pulsatile_solve(case_dir, state, status, run, ranks)
+    if ranks > 1:
+        times = ",".join([*pu["mean_times"], *(ph["time_name"] for ph in pu["phases"].values())])
+        if run(["reconstructPar", "-time", times], "reconstructPar").returncode != 0:
+            raise Stop("reconstructPar failed", "reconstructPar")
+    collect(case_dir, status, [], state, window=tuple(pu["window"]))
+    status.update(kept_wall_markers(case_dir, state, pu))
+    status["fields"] = {"source": "pulsatile", "mean_times": pu["mean_times"]}
+    write_cycle_table(case_dir, pu)
 
 
 def _decompose(case_dir: Path, state: dict[str, Any], run: _Runner) -> None:

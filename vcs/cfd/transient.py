@@ -357,10 +357,11 @@ def courant_plan(
     return out
 
 
-def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bool) -> dict[str, Any]:
-    """One pimpleFoam stage (``washout`` or ``average``) from the latest time to ``end`` (or until
-    ``watch`` stops it), writing only at its end; its time steps, time step range and Courant
-    number merged into ``tr``. Returns the parsed log; raises :class:`Stop` when it fails."""
+def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bool, **extra: Any) -> dict[str, Any]:
+    """One pimpleFoam stage (``washout``, ``average``; a pulsatile cycle's parts) from the latest
+    time to ``end`` (or until ``watch`` stops it), writing only at its end (``extra``: more template
+    settings); its time steps, time step range and Courant number merged into ``tr``. Returns the
+    parsed log; raises :class:`Stop` when it fails."""
     case_dir, tr = solve.case_dir, solve.tr
     render_files(
         case_dir,
@@ -370,7 +371,7 @@ def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bo
         write_interval=_fmt_time(end - _time_dirs(solve.root)[-1][0]),
         average=average,
         monitors=True,
-        **solve.common,
+        **(solve.common | extra),
     )
     log = f"pimpleFoam.{name}"
     r = solve.run(["pimpleFoam"], log, solve.ranks, watch=watch)

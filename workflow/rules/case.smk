@@ -8,6 +8,7 @@ rule openfoam_case:
     input:
         stl="results/patients/{id}/wall/wall.stl",
         model="results/patients/{id}/fit/model.json",  # sizes the mesh (cfd.mesh.cell_size: auto)
+        waveform=waveform_input,  # the inflow waveform CSV of a pulsatile run (none: steady)
     output:
         case=directory("results/patients/{id}/case_setup"),
     params:

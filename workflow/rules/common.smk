@@ -18,7 +18,7 @@ ID_PATTERN = r"[A-Za-z0-9_-]+"
 DEMO_MESH = re.compile(r"results/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<seed>[0-9]+)\.stl")
 SHEET_COLUMNS = (
     "id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap",
-    "cell_size_mm", "flow_rate_l_min", "inlet_velocity_m_s", "valve_area_cm2",
+    "cell_size_mm", "flow_rate_l_min", "inlet_velocity_m_s", "valve_area_cm2", "inflow_waveform",
 )
 # optional per-patient CFD columns: number in the sheet's unit -> (key of vcs.cfd.render_case's
 # `patient`, factor to SI); cell_size_mm may also be `auto`
@@ -127,6 +127,26 @@ def _check_file(path, sheet, n, pid, column):
         fail(f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{path}' not found (paths are relative to {os.getcwd()})")
 
 
+def _check_waveform(path, where):
+    """An inflow waveform CSV is read and checked at planning time (vcs.cfd.waveform.load_waveform):
+    a bad one stops the workflow with one line naming where it was given, the file and the row."""
+    from vcs.cfd.waveform import load_waveform
+    from vcs.errors import VCSInputError
+
+    try:
+        load_waveform(path)
+    except VCSInputError as exc:
+        fail(f"{where}: {exc}")
+
+
+def waveform_input(wildcards):
+    """The patient's inflow waveform file (the sheet's, else cfd.inlet.waveform), or none: an input
+    of the case, so that editing the CSV reruns the patients that use it."""
+    own = PATIENTS[wildcards.id].get("inflow_waveform")
+    path = own or config["cfd"].get("inlet", {}).get("waveform")
+    return [path] if path else []
+
+
 def _number_range(column):
     """(lowest, highest, lowest excluded, also `auto`, unit) of a number column of the patients
     sheet, read from workflow/schemas/patients.schema.yaml (the one place that sets them)."""
@@ -215,13 +235,20 @@ def load_patients(sheet):
                         f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{record[column]}' is not a point of "
                         "three finite numbers x,y,z (mesh units); or give an end listed by `vcs ends`: end:N or NAME=VALUE"
                     )
-        for column in ("mesh", "inlet_cap", "outlet_cap"):
+        for column in ("mesh", "inlet_cap", "outlet_cap", "inflow_waveform"):
             if column in record:
                 _check_file(record[column], sheet, n, pid, column)
+        if "inflow_waveform" in record:
+            _check_waveform(record["inflow_waveform"], f"patients sheet '{sheet}' line {n} (id {pid}): inflow_waveform")
         patients[pid] = {c: record.get(c) for c in SHEET_COLUMNS} | {"units": record.get("units", "auto")}
     return patients
 
 
+if config["cfd"].get("inlet", {}).get("waveform"):
+    _wf = config["cfd"]["inlet"]["waveform"]
+    if not Path(_wf).is_file():
+        fail(f"cfd.inlet.waveform '{_wf}' not found (paths are relative to {os.getcwd()}); give a CSV of one cycle or null")
+    _check_waveform(_wf, "cfd.inlet.waveform")
 PATIENTS = load_patients(config["patients"])
 PATIENT_IDS = sorted(PATIENTS)
 
@@ -282,7 +309,7 @@ def patient_cfd(wildcards):
     cell_size (m or "auto"), flow_rate (m3/s), velocity (m/s) + valve_area (m2). A param, so
     editing one patient's values reruns that patient's CFD only."""
     row = PATIENTS[wildcards.id]
-    out = {}
+    out = {"waveform": row["inflow_waveform"]} if row.get("inflow_waveform") else {}
     for column, (key, factor) in PATIENT_CFD_COLUMNS.items():
         value = row.get(column)
         if value == "auto" and config["cfd"].get("mesh", {}).get("cell_size", "auto") == "auto":

@@ -5,7 +5,8 @@ a stationary time average of the transient fallback) get placeholder outputs tha
 reason and stage: the atlas excludes them from their status anyway. A case that cannot be
 resampled gets the same placeholder with stage ``sampling`` (a per-patient failure, not a job
 failure), which the atlas reads. A time-averaged case is sampled from its means (U, p, WSS keep
-their names; TAWSS and OSI are added).
+their names; TAWSS and OSI are added); a pulsatile case from its kept cycles' means (TAWSS, OSI,
+RRT, ECAP) and its phase instants (vcs.cfd.resample.sample_pulsatile).
 """
 
 import json
@@ -58,21 +59,23 @@ def main(smk):
         placeholder(smk, reason, status_stage(status))
         return
 
-    from vcs.cfd import sample_case, write_fields
+    from vcs.cfd import sample_case, sample_pulsatile, write_fields
     from vcs.vessel import VesselModel
 
     grid = dict(smk.params.grid)
+    kw = {
+        "n_tau": grid["n_tau"],
+        "n_theta": grid["n_theta"],
+        "n_rho": grid["n_rho"],
+        "rho_scale": 1e-3,
+        "rho_density": float(smk.params.rho),
+    }
     try:
         model = VesselModel.load(smk.input.model)
-        fields = sample_case(
-            smk.input.case,
-            model,
-            n_tau=grid["n_tau"],
-            n_theta=grid["n_theta"],
-            n_rho=grid["n_rho"],
-            rho_scale=1e-3,
-            rho_density=float(smk.params.rho),
-        )
+        if status.get("pulsatile"):
+            fields = sample_pulsatile(smk.input.case, model, status["pulsatile"], **kw)
+        else:
+            fields = sample_case(smk.input.case, model, **kw)
         write_fields(fields, smk.output.npz, vtu_path=smk.output.vtu)
     except Exception as exc:  # this patient's case cannot be resampled: recorded, not a cohort stop
         log.error("resampling %s failed\n%s", smk.wildcards.id, traceback.format_exc())

@@ -1,0 +1,200 @@
+"""Pulsatile flow with the real OpenFOAM (ESI): Womersley flow in a straight rigid tube.
+
+The truth is the analytic Womersley solution of the waveform's Fourier series
+(:mod:`vcs.cfd.womersley`): the centreline velocity and the wall shear stress over the cycle
+(amplitude and phase), TAWSS and OSI (flow reversal in the waveform), OSI = 0 for a steady flow
+and 0.5 for a zero-mean oscillation; the markers accumulated by fieldAverage at every time step
+against the every-step record of the area-mean |WSS|. CI-sized meshes; the convergence with the
+mesh is bench/pulsatile_womersley.py's.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vcs.cfd import detect_openfoam, render_case, run_case
+from vcs.cfd.foamfiles import function_series, read_dat
+from vcs.cfd.waveform import load_waveform
+from vcs.cfd.womersley import centreline_velocity, tawss_osi, wall_shear_stress
+from vcs.phantoms.analytic import write_closed_tube_stl
+
+HAVE_FOAM = shutil.which("pimpleFoam") is not None and detect_openfoam()[0] == "esi"
+needs_foam = pytest.mark.skipif(not HAVE_FOAM, reason="Debian's ESI OpenFOAM (pimpleFoam) not installed")
+
+R = 0.005  # tube radius [m]
+LENGTH = 0.05  # [m]
+AXIS = np.array([0.0, 0.0, 1.0])
+NU = 3.37e-6
+PERIOD = 0.4  # [s]: Womersley number R sqrt(2 pi / (T nu)) = 8.6
+Q0 = 2.0e-6  # mean flow [m3/s] (mean velocity 2.5 cm/s)
+
+
+def write_waveform(path: Path, mean: float, amplitude: float, n: int = 200) -> Path:
+    """A CSV of one cycle of Q(t) = mean + amplitude sin(2 pi t / T) (closed: the last row repeats
+    the first)."""
+    t = np.linspace(0.0, PERIOD, n + 1)
+    q = (mean + amplitude * np.sin(2 * np.pi * t / PERIOD)) * 6e4
+    q[-1] = q[0]
+    rows = "\n".join(f"{a:.8g},{b:.10g}" for a, b in zip(t, q))
+    path.write_text(
+        f"# test waveform: {mean} + {amplitude} sin(2 pi t / {PERIOD}) m3/s\ntime_s,flow_rate_l_min\n{rows}\n"
+    )
+    return path
+
+
+def pulsatile_cfd(waveform: Path, cell: float, **pulsatile) -> dict:
+    return {
+        "mesh": {"cell_size": cell, "layers": 2},
+        "physics": {"nu": NU},
+        "inlet": {"type": "parabolic", "waveform": str(waveform), "scaling": "fixed"},
+        "pulsatile": {
+            "profile": "womersley",
+            "cycles": 3,
+            "discard_cycles": 1,
+            "max_cycles": 4,
+            "periodicity_tolerance": 0.02,
+            "samples_per_cycle": 80,
+            "probes": [[0.0, 0.0, LENGTH / 2]],
+            **pulsatile,
+        },
+    }
+
+
+def run_tube(
+    tmp: Path, name: str, mean: float, amplitude: float, cell: float = 7.5e-4, **pulsatile
+) -> tuple[Path, dict]:
+    stl = write_closed_tube_stl(tmp / f"{name}.stl", radius=R, length=LENGTH, n_theta=96, n_z=40, axis=AXIS)
+    wf = write_waveform(tmp / f"{name}.csv", mean, amplitude)
+    case = tmp / name
+    render_case(case, stl, pulsatile_cfd(wf, cell, **pulsatile), flavour="esi")
+    return case, run_case(case, ranks=1)
+
+
+@pytest.fixture(scope="module")
+def reversing(tmp_path_factory):
+    """A waveform with flow reversal: Q = Q0 (1 + 1.5 sin wt)."""
+    tmp = tmp_path_factory.mktemp("womersley")
+    case, st = run_tube(tmp, "rev", Q0, 1.5 * Q0)
+    return case, st, load_waveform(tmp / "rev.csv")
+
+
+def _last_cycle(series: np.ndarray, st: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(time in the cycle, values) of the last kept cycle of an every-step record."""
+    t0, t1 = st["pulsatile"]["window"][1] - PERIOD, st["pulsatile"]["window"][1]
+    m = (series[:, 0] > t0 + 1e-9) & (series[:, 0] <= t1 + 1e-9)
+    return series[m, 0] - t0, series[m, 1:]
+
+
+def _probe_record(case: Path) -> np.ndarray:
+    """The U record of the (one) probe over every stage (a start folder per pimpleFoam run)."""
+    files = sorted((case / "postProcessing" / "probes").glob("*/U"), key=lambda p: float(p.parent.name))
+    rows = {float(r[0]): r for f in files for r in read_dat(f)}
+    return np.array([rows[t] for t in sorted(rows)])
+
+
+def _amplitude_phase(t: np.ndarray, y: np.ndarray) -> tuple[float, complex]:
+    """Mean and first-harmonic complex amplitude of a record over one period (trapezoid)."""
+    w = 2 * np.pi / PERIOD
+    mean = np.trapezoid(y, t) / (t[-1] - t[0])
+    c = 2 * np.trapezoid(y * np.exp(-1j * w * t), t) / (t[-1] - t[0])
+    return float(mean), complex(c)
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_womersley_tube_against_the_analytic_solution(reversing):
+    case, st, wf = reversing
+    assert st["converged"], st["reason"]
+    pu = st["pulsatile"]
+    assert pu["periodic"] and pu["cycles_run"] <= 4
+    assert st["inlet"]["type"] == "timeVaryingMappedFixedValue" and st["inlet"]["flux_error_rel"] < 1e-6
+    coeffs = wf.fourier(10)
+    # centreline velocity over the last cycle, at mid-length (probe), against Womersley
+    probe = _probe_record(case)
+    t, u = _last_cycle(np.column_stack([probe[:, 0], probe[:, 1:] @ AXIS]), st)
+    u = u[:, 0]
+    exact = centreline_velocity(t, coeffs, PERIOD, R, NU)
+    m_sim, c_sim = _amplitude_phase(t, u)
+    m_ex, c_ex = _amplitude_phase(t, exact)
+    amp_err = abs(abs(c_sim) / abs(c_ex) - 1)
+    phase_err = abs(np.angle(c_sim / c_ex, deg=True))
+    assert abs(m_sim / m_ex - 1) < 0.08, (m_sim, m_ex)
+    assert amp_err < 0.08, amp_err
+    assert phase_err < 8.0, phase_err
+    # |WSS| over the cycle: the area mean on the wall (uniform in a developed tube) at every step
+    wss = function_series(case, "wss_wall")
+    t, w = _last_cycle(wss, st)
+    w_ex = np.abs(wall_shear_stress(t, coeffs, PERIOD, R, NU))
+    assert np.abs(w[:, 0] - w_ex).max() < 0.15 * w_ex.max(), np.abs(w[:, 0] - w_ex).max() / w_ex.max()
+    # TAWSS and OSI over the kept cycles (accumulated every time step by fieldAverage)
+    tawss_ex, osi_ex = tawss_osi(coeffs, PERIOD, R, NU)
+    rho = st["rho"]
+    assert st["tawss_Pa"]["mean"] == pytest.approx(tawss_ex * rho, rel=0.12)
+    assert osi_ex > 0.05  # the waveform reverses: the wall shear reverses part of the cycle
+    assert st["osi"]["mean"] == pytest.approx(osi_ex, abs=0.03)
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_accumulated_tawss_matches_the_every_step_record(reversing):
+    """fieldAverage's TAWSS (area mean over the wall, kept cycles) against the trapezoid integral of
+    the area-mean |WSS| recorded at every time step (the same quantity: the area mean of a time
+    mean is the time mean of the area mean)."""
+    case, st, _ = reversing
+    wss = function_series(case, "wss_wall")
+    t0, t1 = st["pulsatile"]["window"]
+    m = (wss[:, 0] >= t0 - 1e-9) & (wss[:, 0] <= t1 + 1e-9)
+    dense = np.trapezoid(wss[m, 1], wss[m, 0]) / (t1 - t0)
+    assert st["tawss_Pa"]["mean"] / st["rho"] == pytest.approx(dense, rel=0.01)
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_osi_is_zero_for_a_steady_flow_and_half_for_a_zero_mean_oscillation(tmp_path):
+    fast = {"cycles": 2, "max_cycles": 2, "periodicity_tolerance": 1.0, "probes": [], "min_steps_per_cycle": 50}
+    _, steady = run_tube(tmp_path, "steady", Q0, 0.0, cell=1.0e-3, **fast)
+    assert steady["converged"], steady["reason"]
+    assert steady["osi"]["max"] < 1e-3
+    _, osc = run_tube(tmp_path, "osc", 0.0 + 1e-12, 2 * Q0, cell=1.0e-3, **fast)
+    assert osc["converged"], osc["reason"]
+    assert osc["osi"]["mean"] == pytest.approx(0.5, abs=0.03)
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_pulsatile_fields_on_the_vcs_grid(reversing, tmp_path):
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vcs"))
+    from test_resample import straight_model
+
+    from vcs.cfd import sample_pulsatile
+
+    case, st, wf = reversing
+    model = straight_model(radius_mm=R * 1e3, length_mm=LENGTH * 1e3, axis=AXIS)
+    f = sample_pulsatile(case, model, st["pulsatile"], n_tau=12, n_theta=8, n_rho=5, rho_density=st["rho"])
+    assert str(f["field_source"]) == "pulsatile"
+    for key in ("TAWSS", "OSI", "RRT", "ECAP"):
+        assert f[key].shape == (12, 8)
+    tawss_ex, osi_ex = tawss_osi(wf.fourier(10), PERIOD, R, NU)
+    mid = slice(3, 9)  # away from the ends
+    assert np.median(f["TAWSS"][mid]) == pytest.approx(tawss_ex * st["rho"], rel=0.15)
+    assert np.median(f["OSI"][mid]) == pytest.approx(osi_ex, abs=0.04)
+    osi, tawss = f["OSI"][mid], f["TAWSS"][mid]
+    np.testing.assert_allclose(f["ECAP"][mid], osi / tawss, rtol=1e-12)
+    np.testing.assert_allclose(f["RRT"][mid], 1 / ((1 - 2 * osi) * tawss), rtol=1e-12)
+    assert list(f["phase_names"]) == ["peak_systole", "end_systole", "mid_diastole"]
+    peak = f["phase/peak_systole/U"]
+    assert peak.shape == f["U"].shape
+    # at peak systole the axial velocity on the axis is near its analytic value
+    t_peak = st["pulsatile"]["phases"]["peak_systole"]["phase_s"]
+    u_ex = float(centreline_velocity(np.array([t_peak]), wf.fourier(10), PERIOD, R, NU)[0])
+    assert float(np.median(peak[mid, :, 0] @ AXIS)) == pytest.approx(u_ex, rel=0.12)
+    json.dumps(st)  # status.json is plain JSON
+    assert math.isfinite(st["pulsatile"]["cycles"][-1]["cpu_s"])
