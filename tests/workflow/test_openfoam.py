@@ -565,7 +565,8 @@ def test_render_jet_mesh_and_transient_stages(tmp_path, flavour):
         i_wss = lines.index("#includeFunc wallShearStress(executeControl=timeStep)")
         i_mag = lines.index("#includeFunc mag(wallShearStress, result=magWallShearStress, executeControl=timeStep)")
         i_avg = lines.index(
-            "#includeFunc fieldAverage(U, p, wallShearStress, magWallShearStress, restartOnRestart=yes)"
+            "#includeFunc fieldAverage(U, p, wallShearStress, magWallShearStress, restartOnRestart=yes, "
+            "funcName=fieldAverage)"
         )
         assert i_wss < i_mag < i_avg and "#includeFunc writeCellVolumes" in lines
         assert "version     2.0" not in ctl_text

@@ -25,7 +25,6 @@ from vcs.cfd import detect_openfoam, render_case, run_case
 from vcs.cfd.foamfiles import parse_banner, parse_solver_log
 from vcs.cfd.openfoam import openfoam_installation
 from vcs.cfd.run import _pyfoam_check
-from vcs.cfd.utilities import Stop
 from vcs.phantoms.analytic import write_closed_tube_stl
 
 REAL_SIMPLEFOAM = shutil.which("simpleFoam")
@@ -822,15 +821,6 @@ def test_pulsatile_org10_inlet_and_stages_read_by_v10(tiny_tube, tmp_path):
         assert re.search(r"default\s+backward;", st["fvSchemes"])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="v10 names an #includeFunc function after its arguments (functionObjectList.C): the "
-    "restartOnRestart=yes|no argument gives a cycle's parts different names, so a continued part "
-    "finds no <start>/uniform/<name>Properties and restarts the average (fieldAverage.C "
-    "readAveragingProperties, then beta = 1 at its first step); fix: funcName=fieldAverage in the "
-    "org10 _functions.j2",
-)
 def test_pulsatile_org10_average_continues_across_cuts(tiny_tube, tmp_path):
     """fieldAverage's properties (totalIter, totalTime) are found by the name of the function
     object: the parts of a cycle must give it one name for v10 to continue the average."""
@@ -846,23 +836,15 @@ def test_pulsatile_org10_average_continues_across_cuts(tiny_tube, tmp_path):
 
 def test_pulsatile_stage_writes_model(tiny_tube, tmp_path):
     """Control of the write-time model of :class:`_Stages`: written from the start time (ESI
-    v1912), every cut of the cycle gets its folder and no other time is written."""
+    v1912, whose writeInterval the stages count from their start: vcs.cfd.transient.write_origin),
+    every cut of the cycle gets its folder and no other time is written."""
     case, state = _pulsatile_org10(tmp_path, tiny_tube)
-    _, cycle = _cycle(case, state, "esi")
+    _, cycle = _cycle(case, {**state, "flavour": "esi"}, "esi")
     assert cycle["cut_names"] == ["0.2", "0.6", "0.7"] and cycle["end_name"] == "0.8"
     written = sorted(p.name for p in case.iterdir() if re.fullmatch(r"[0-9.]+", p.name))
     assert written == ["0", "0.2", "0.6", "0.7", "0.8"]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=Stop,
-    reason="v10 counts adjustableRunTime writes from beginTime, kept in <time>/uniform/time across "
-    "restarts (Time.C setControls/adjustDeltaT/operator++, TimeIO.C writeTimeDict), not from the "
-    "restart's start time as ESI does: a stage restarted at 0.2 s with writeInterval 0.4 writes at "
-    "0.4 s and never reaches its end 0.6 s; fix: for org10 a writeInterval of endTime - beginTime "
-    "(or no beginTime in the start folder's uniform/time)",
-)
 def test_pulsatile_org10_stages_write_their_ends_under_v10(tiny_tube, tmp_path):
     """Each part of a cycle, restarted by pimpleFoam of OpenFOAM-10 (write times as its Time.C
     places them), ends with its time folder at its cut."""

@@ -157,12 +157,15 @@ def test_accumulated_tawss_matches_the_every_step_record(reversing):
 @pytest.mark.openfoam
 @needs_foam
 def test_osi_is_zero_for_a_steady_flow_and_half_for_a_zero_mean_oscillation(tmp_path):
+    """OSI from the accumulated wall shear: 0 when the shear never reverses, 1/2 when it spends
+    as much of the cycle one way as the other. Neither needs a periodic state (a steady flow from
+    rest is still developing after two cycles here: R^2/nu = 7 s), so a short run does."""
     fast = {"cycles": 2, "max_cycles": 2, "periodicity_tolerance": 1.0, "probes": [], "min_steps_per_cycle": 50}
     _, steady = run_tube(tmp_path, "steady", Q0, 0.0, cell=1.0e-3, **fast)
-    assert steady["converged"], steady["reason"]
+    assert steady["pulsatile"]["evaluated"], steady["reason"]
     assert steady["osi"]["max"] < 1e-3
-    _, osc = run_tube(tmp_path, "osc", 0.0 + 1e-12, 2 * Q0, cell=1.0e-3, **fast)
-    assert osc["converged"], osc["reason"]
+    _, osc = run_tube(tmp_path, "osc", 0.0, 2 * Q0, cell=1.0e-3, **fast)
+    assert osc["pulsatile"]["evaluated"], osc["reason"]
     assert osc["osi"]["mean"] == pytest.approx(0.5, abs=0.03)
 
 

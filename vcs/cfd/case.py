@@ -544,6 +544,11 @@ def applied_waveform(
     if own:
         factor, why = 1.0, f"the patient's own waveform {Path(path).name} (patients sheet), as given"
     elif inflow["source"] == "patient":
+        if not wf.mean_m3_s > 0:
+            raise VCSInputError(
+                f"waveform {path} has a mean flow of {wf.mean_m3_s * 6e4:.4g} L/min: it cannot be scaled to the "
+                "patient's flow rate; give the patient's own waveform (inflow_waveform) instead"
+            )
         factor = inflow["flow_rate_m3_s"] / wf.mean_m3_s
         why = f"{Path(path).name} scaled to the patient's mean flow {inflow['flow_rate_m3_s'] * 6e4:.4g} L/min"
     else:

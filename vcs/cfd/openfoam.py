@@ -182,6 +182,8 @@ FLAVOURS: dict[str, dict[str, Any]] = {
         "inside_point_key": "locationInMesh",
         "decomposer_key": "method",
         "medial_axis_key": "minMedianAxisAngle",
+        # adjustableRunTime writes are counted from the run's start time (Time.C adjustDeltaT)
+        "write_origin": "start",
         "files": _COMMON_FILES + ["constant/transportProperties", "constant/turbulenceProperties"],
     },
     "org10": {
@@ -191,6 +193,9 @@ FLAVOURS: dict[str, dict[str, Any]] = {
         "inside_point_key": "insidePoint",
         "decomposer_key": "decomposer",
         "medial_axis_key": "minMedialAxisAngle",
+        # adjustableRunTime writes are counted from beginTime, kept in <time>/uniform/time across
+        # restarts (OpenFOAM-10 src/OpenFOAM/db/Time/Time.C setControls, TimeIO.C)
+        "write_origin": "begin_time",
         "files": _COMMON_FILES + ["constant/physicalProperties", "constant/momentumTransport"],
     },
 }

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from vcs.cfd.case import render_files
 from vcs.cfd.foamfiles import function_series, parse_solver_log, patch_geometry, read_internal_field
+from vcs.cfd.openfoam import FLAVOURS
 from vcs.cfd.status import _log_summary, _wall_faces
 from vcs.cfd.steady import STAGE_FILES, request_write_now
 from vcs.cfd.timeseries import mean_error, mser_truncation, uniform_record
@@ -357,6 +358,22 @@ def courant_plan(
     return out
 
 
+def write_origin(root: Path, flavour: str) -> float:
+    """The time from which the next pimpleFoam run counts its ``adjustableRunTime`` writes (so that
+    ``writeInterval = end - origin`` writes exactly at the stage's end): the latest time (ESI), or
+    the ``beginTime`` kept in its ``uniform/time`` (openfoam.org v10; absent: the latest time)."""
+    start, name = _time_dirs(root)[-1]
+    if FLAVOURS[flavour].get("write_origin") != "begin_time":
+        return start
+    tdict = root / name / "uniform" / "time"
+    m = (
+        re.search(r"^\s*beginTime\s+([-+0-9.eE]+)\s*;", tdict.read_text(errors="replace"), re.M)
+        if tdict.exists()
+        else None
+    )
+    return float(m.group(1)) if m else start
+
+
 def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bool, **extra: Any) -> dict[str, Any]:
     """One pimpleFoam stage (``washout``, ``average``; a pulsatile cycle's parts) from the latest
     time to ``end`` (or until ``watch`` stops it), writing only at its end (``extra``: more template
@@ -368,7 +385,7 @@ def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bo
         solve.state,
         STAGE_FILES,
         end_time=_fmt_time(end),
-        write_interval=_fmt_time(end - _time_dirs(solve.root)[-1][0]),
+        write_interval=_fmt_time(end - write_origin(solve.root, solve.state["flavour"])),
         average=average,
         monitors=True,
         **(solve.common | extra),
