@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from vcs.cfd import detect_openfoam, render_case, run_case
-from vcs.cfd.foamfiles import function_series, read_dat
+from vcs.cfd.foamfiles import function_series, function_table
+from vcs.cfd.verification import harmonic_errors
 from vcs.cfd.waveform import load_waveform
 from vcs.cfd.womersley import centreline_velocity, tawss_osi, wall_shear_stress
 from vcs.phantoms.analytic import write_closed_tube_stl
@@ -84,26 +85,12 @@ def reversing(tmp_path_factory):
     return case, st, load_waveform(tmp / "rev.csv")
 
 
-def _last_cycle(series: np.ndarray, st: dict) -> tuple[np.ndarray, np.ndarray]:
+def _last_cycle(record: np.ndarray, st: dict) -> tuple[np.ndarray, np.ndarray]:
     """(time in the cycle, values) of the last kept cycle of an every-step record."""
-    t0, t1 = st["pulsatile"]["window"][1] - PERIOD, st["pulsatile"]["window"][1]
-    m = (series[:, 0] > t0 + 1e-9) & (series[:, 0] <= t1 + 1e-9)
-    return series[m, 0] - t0, series[m, 1:]
-
-
-def _probe_record(case: Path) -> np.ndarray:
-    """The U record of the (one) probe over every stage (a start folder per pimpleFoam run)."""
-    files = sorted((case / "postProcessing" / "probes").glob("*/U"), key=lambda p: float(p.parent.name))
-    rows = {float(r[0]): r for f in files for r in read_dat(f)}
-    return np.array([rows[t] for t in sorted(rows)])
-
-
-def _amplitude_phase(t: np.ndarray, y: np.ndarray) -> tuple[float, complex]:
-    """Mean and first-harmonic complex amplitude of a record over one period (trapezoid)."""
-    w = 2 * np.pi / PERIOD
-    mean = np.trapezoid(y, t) / (t[-1] - t[0])
-    c = 2 * np.trapezoid(y * np.exp(-1j * w * t), t) / (t[-1] - t[0])
-    return float(mean), complex(c)
+    t1 = st["pulsatile"]["window"][1]
+    t0 = t1 - PERIOD
+    m = (record[:, 0] > t0 + 1e-9) & (record[:, 0] <= t1 + 1e-9)
+    return record[m, 0] - t0, record[m, 1:]
 
 
 @pytest.mark.openfoam
@@ -116,27 +103,21 @@ def test_womersley_tube_against_the_analytic_solution(reversing):
     assert st["inlet"]["type"] == "timeVaryingMappedFixedValue" and st["inlet"]["flux_error_rel"] < 1e-6
     coeffs = wf.fourier(10)
     # centreline velocity over the last cycle, at mid-length (probe), against Womersley
-    probe = _probe_record(case)
-    t, u = _last_cycle(np.column_stack([probe[:, 0], probe[:, 1:] @ AXIS]), st)
-    u = u[:, 0]
-    exact = centreline_velocity(t, coeffs, PERIOD, R, NU)
-    m_sim, c_sim = _amplitude_phase(t, u)
-    m_ex, c_ex = _amplitude_phase(t, exact)
-    amp_err = abs(abs(c_sim) / abs(c_ex) - 1)
-    phase_err = abs(np.angle(c_sim / c_ex, deg=True))
-    assert abs(m_sim / m_ex - 1) < 0.08, (m_sim, m_ex)
-    assert amp_err < 0.08, amp_err
-    assert phase_err < 8.0, phase_err
-    # |WSS| over the cycle: the area mean on the wall (uniform in a developed tube) at every step
-    wss = function_series(case, "wss_wall")
-    t, w = _last_cycle(wss, st)
-    w_ex = np.abs(wall_shear_stress(t, coeffs, PERIOD, R, NU))
-    assert np.abs(w[:, 0] - w_ex).max() < 0.15 * w_ex.max(), np.abs(w[:, 0] - w_ex).max() / w_ex.max()
+    t, u = _last_cycle(function_table(case, "probes", "U"), st)
+    e = harmonic_errors(t, u @ AXIS, centreline_velocity(t, coeffs, PERIOD, R, NU), PERIOD)
+    assert abs(e["mean_rel"]) < 0.05 and abs(e["amplitude_rel"]) < 0.05 and abs(e["phase_deg"]) < 5, e
+    # the wall shear stress over the cycle: the area-mean WSS vector on the wall at every time step
+    # (developed Womersley flow: uniform, axial, signed), and the area-mean |WSS|
+    t, w = _last_cycle(function_table(case, "wss_wall"), st)
+    exact = wall_shear_stress(t, coeffs, PERIOD, R, NU)
+    e = harmonic_errors(t, w[:, 1:4] @ AXIS, exact, PERIOD)
+    assert abs(e["mean_rel"]) < 0.08 and abs(e["amplitude_rel"]) < 0.08 and abs(e["phase_deg"]) < 5, e
+    assert e["max_rel"] < 0.1, e
+    assert np.abs(w[:, 0] - np.abs(exact)).max() < 0.1 * np.abs(exact).max()
     # TAWSS and OSI over the kept cycles (accumulated every time step by fieldAverage)
     tawss_ex, osi_ex = tawss_osi(coeffs, PERIOD, R, NU)
-    rho = st["rho"]
-    assert st["tawss_Pa"]["mean"] == pytest.approx(tawss_ex * rho, rel=0.12)
-    assert osi_ex > 0.05  # the waveform reverses: the wall shear reverses part of the cycle
+    assert osi_ex > 0.2  # the waveform reverses: the wall shear reverses for part of the cycle
+    assert st["tawss_Pa"]["mean"] == pytest.approx(tawss_ex * st["rho"], rel=0.08)
     assert st["osi"]["mean"] == pytest.approx(osi_ex, abs=0.03)
 
 

@@ -545,6 +545,39 @@ def function_series(case_dir: Path | str, name: str) -> NDArray[np.floating]:
     return np.column_stack([t, [rows[x] for x in t]])
 
 
+def function_table(case_dir: Path | str, name: str, file: str = "*.dat") -> NDArray[np.floating]:
+    """Every column of a function object's record over all its start-time folders (a restarted
+    stage starts a new folder): rows sorted by time, a time written twice taken from the later
+    folder; vectors flattened (e.g. probes' ``U``: time, then 3 components per probe).
+
+    Parameters
+    ----------
+    case_dir : Path or str
+        The OpenFOAM case.
+    name : str
+        Function-object name (``postProcessing/<name>/<start time>/<file>``).
+    file : str
+        File name (glob) in each start folder: ``*.dat`` (surfaceFieldValue), ``U`` (probes).
+
+    Returns
+    -------
+    (n, w) float
+        (0, 2) when nothing was written; w the narrowest row of the files.
+    """
+    root = Path(case_dir) / "postProcessing" / name
+    files = sorted(
+        root.glob(f"*/{file}"), key=lambda p: (float(p.parent.name) if _isnum(p.parent.name) else 0.0, p.name)
+    )
+    rows: dict[float, NDArray[np.floating]] = {}
+    for f in files:
+        for r in read_dat(f):
+            rows[float(r[0])] = r
+    if not rows:
+        return np.zeros((0, 2))
+    width = min(len(r) for r in rows.values())
+    return np.array([rows[t][:width] for t in sorted(rows)])
+
+
 def window_mean(case_dir: Path | str, name: str, start: float, end: float) -> float | None:
     """Time-weighted mean of a function object's values over the time window (start, end].
 

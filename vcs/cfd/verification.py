@@ -9,6 +9,8 @@ Not equations of Romero et al. (2024): these are the analytic and published valu
   De = Re sqrt(a / R) with Re = U_mean 2a / nu; the ratio of the curved-pipe friction factor to
   the straight-pipe one at the same Re (= ratio of the pressure gradients along the centreline)
   from the correlations of Ito (1959) and White (1929).
+* Womersley flow in a straight rigid pipe (:mod:`vcs.cfd.womersley`): a periodic record against
+  the analytic one by its mean and first harmonic (:func:`harmonic_errors`).
 * On the (tau, theta, rho_n) grid of :mod:`vcs.cfd.resample`: the area-weighted mean of a field
   over each cross-section, the developed pressure gradient along the centreline (a straight-line
   fit over a tau window), and percentiles of a local relative error over a tau window.
@@ -23,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "dean_number",
+    "harmonic_errors",
     "developed_gradient",
     "ito_friction_ratio",
     "local_error_stats",
@@ -249,4 +252,49 @@ def local_error_stats(
         "p99_abs": float(np.percentile(a, 99)),
         "max_abs": float(a.max()),
         "argmax": [float(t[rows[i]]), int(j)],
+    }
+
+
+def harmonic_errors(t: ArrayLike, simulated: ArrayLike, exact: ArrayLike, period: float) -> dict[str, float]:
+    """Mean and first-harmonic errors of a record over one period against the exact one.
+
+    With c_k = (2 / T) int_0^T y(t) exp(-i k omega t) dt (trapezoid on the record's own times,
+    omega = 2 pi / T) and the mean m = (1/T) int y dt:
+
+        mean_rel = m_sim / m_exact - 1,  amplitude_rel = |c_1,sim| / |c_1,exact| - 1,
+        phase_deg = arg(c_1,sim / c_1,exact) in degrees (positive: the simulation leads),
+        max_rel = max_t |y_sim - y_exact| / max_t |y_exact|.
+
+    Parameters
+    ----------
+    t : (n,) float
+        Times within one period (s), increasing.
+    simulated, exact : (n,) float
+        The record and the exact values at ``t``.
+    period : float
+        T (s).
+
+    Returns
+    -------
+    dict
+        ``mean_rel``, ``amplitude_rel``, ``phase_deg``, ``max_rel`` and the exact ``mean`` and
+        ``amplitude``.
+    """
+    tt = np.asarray(t, dtype=float)
+    y, e = np.asarray(simulated, dtype=float), np.asarray(exact, dtype=float)
+    span = float(tt[-1] - tt[0])
+    w = np.exp(-2j * np.pi * tt / period)
+
+    def mean_c1(v: NDArray[np.floating]) -> tuple[float, complex]:
+        return float(np.trapezoid(v, tt) / span), complex(2 * np.trapezoid(v * w, tt) / span)
+
+    m_s, c_s = mean_c1(y)
+    m_e, c_e = mean_c1(e)
+    return {
+        "mean": m_e,
+        "amplitude": abs(c_e),
+        "mean_rel": m_s / m_e - 1 if m_e else float("nan"),
+        "amplitude_rel": abs(c_s) / abs(c_e) - 1,
+        "phase_deg": float(np.angle(c_s / c_e, deg=True)),
+        "max_rel": float(np.abs(y - e).max() / np.abs(e).max()),
     }

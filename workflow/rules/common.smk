@@ -246,6 +246,10 @@ def load_patients(sheet):
 
 if config["cfd"].get("inlet", {}).get("waveform"):
     _wf = config["cfd"]["inlet"]["waveform"]
+    if not Path(_wf).is_file() and (Path(workflow.basedir) / _wf).is_file():
+        # a path of the repository (the shipped vcs/data/waveforms/ascending_aorta.csv of
+        # config/pulsatile.yaml) when the run is in another directory (snakemake -d)
+        _wf = config["cfd"]["inlet"]["waveform"] = str(Path(workflow.basedir) / _wf)
     if not Path(_wf).is_file():
         fail(f"cfd.inlet.waveform '{_wf}' not found (paths are relative to {os.getcwd()}); give a CSV of one cycle or null")
     _check_waveform(_wf, "cfd.inlet.waveform")
