@@ -116,9 +116,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{100 * w['mean_rel']:+.2f} / {100 * w['amplitude_rel']:+.2f} / {w['phase_deg']:+.2f} | "
             f"{100 * r['tawss_rel']:+.2f} | {r['osi']:.4f} ({r['osi_exact']:.4f}) |"
         )
-    print(
-        f"machine: {platform.node()} {os.cpu_count()} cores; Womersley number {R * np.sqrt(2 * np.pi / PERIOD / NU):.1f}"
-    )
+    alpha = R * np.sqrt(2 * np.pi / PERIOD / NU)
+    print(f"machine: {platform.node()} {os.cpu_count()} cores; Womersley number {alpha:.1f}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0
