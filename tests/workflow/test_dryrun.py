@@ -430,6 +430,53 @@ def test_config_text_for_openfoam_dictionaries_is_refused_unless_listed(cohort, 
     assert " > ".join(keys) in msg and "is not one of" in msg, msg
 
 
+def _waveform(path: Path, rows: list[str]) -> Path:
+    path.write_text("# a test cycle\ntime_s,flow_rate_l_min\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def _good_rows(n: int = 24) -> list[str]:
+    return [f"{0.8 * i / (n - 1):.6g},{5 + (3 if 0 < i < n - 1 else 0)}" for i in range(n)]
+
+
+def test_bad_config_waveform_fails_with_one_line_naming_file_and_row(cohort):
+    rows = _good_rows()
+    rows[5] = rows[5].split(",")[0] + ",lots"
+    _waveform(cohort.path / "bad.csv", rows)
+    cohort.update_config("cfd", "inlet", "waveform", "bad.csv")
+    msg = _one_line_error(cohort)
+    assert msg.count("cfd.inlet.waveform") == 1 and "bad.csv" in msg and "line 8" in msg, msg
+
+
+def test_missing_config_waveform_fails_with_one_line(cohort):
+    cohort.update_config("cfd", "inlet", "waveform", "nope.csv")
+    assert "cfd.inlet.waveform 'nope.csv' not found" in _one_line_error(cohort)
+
+
+def test_bad_sheet_waveform_fails_with_one_line(cohort):
+    rows = _good_rows()
+    rows[3], rows[4] = rows[4], rows[3]  # times not increasing
+    _waveform(cohort.path / "p2.csv", rows)
+    cohort.write_sheet(
+        [{"id": "P1", "mesh": "meshes/p1.stl"}, {"id": "P2", "mesh": "meshes/p3.stl", "inflow_waveform": "p2.csv"}]
+    )
+    msg = _one_line_error(cohort)
+    assert "line 4 (id P2): inflow_waveform" in msg and "p2.csv" in msg and "line 7" in msg, msg
+
+
+def test_editing_a_patients_waveform_reruns_only_that_patients_cfd(cohort):
+    _waveform(cohort.path / "p2.csv", _good_rows())
+    rows = [{"id": "P1", "mesh": "meshes/p1.stl"}, {"id": "P2", "mesh": "meshes/p 2 scan.stl"}]
+    rows.append({"id": "P3", "mesh": "meshes/p3.stl"})
+    rows[1]["inflow_waveform"] = "p2.csv"
+    cohort.write_sheet(rows)
+    cohort.fake_finished_run()
+    assert cohort.planned_jobs() == set()
+    _waveform(cohort.path / "p2.csv", _good_rows(30))  # same file, new content
+    cfd = ["openfoam_case", "openfoam_solve", "fields_sample"]
+    assert cohort.planned_jobs() == chain(cfd, ["P2"]) | COHORT
+
+
 def test_every_config_string_is_an_enum_or_a_pattern():
     """Every string of the config schema is constrained (enum or pattern), except the sheet's path,
     which never reaches an OpenFOAM dictionary."""

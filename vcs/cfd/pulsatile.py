@@ -153,7 +153,9 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
     normalised radius of :func:`vcs.cfd.womersley.section_radius` (about the rim's centroid),
     along the inward normal of the inlet patch, its
     discrete flux the waveform's flow rate at every instant. ``mapMethod nearest`` on the face
-    centres themselves: the values are the faces' own.
+    centres themselves: the values are the faces' own. Each face's velocity is along its own inward
+    normal (as OpenFOAM's flowRateInletVelocity does), so the flux sum_f u_f |S_f| is the
+    waveform's Q(t) exactly on a snapped, not quite flat inlet too.
 
     Returns
     -------
@@ -168,8 +170,8 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
     name = next(p["name"] for p in state["patches"] if p["role"] == "inlet")
     centres, sf = patch_geometry(case_dir, name)
     area = np.linalg.norm(sf, axis=1)
-    n_in = -sf.sum(0) / np.linalg.norm(sf.sum(0))
-    a_n = sf @ (-n_in)  # face areas projected on the inward normal
+    n_in = -sf.sum(0) / np.linalg.norm(sf.sum(0))  # the section's inward normal
+    n_face = -sf / area[:, None]  # each face's own inward normal: the flux u_f |S_f| (weights > 0)
     rim = _patch_boundary_edges(case_dir, name)
     mid, length = rim.mean(1), np.linalg.norm(rim[:, 1] - rim[:, 0], axis=1)
     centre = (mid * length[:, None]).sum(0) / length.sum()  # centroid of the rim
@@ -180,8 +182,8 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
     times = np.arange(plan["max_cycles"] * n_per + 2) * (period / n_per)
     r_eq = math.sqrt(float(area.sum()) / math.pi)
     nu = float(state["cfd"]["physics"]["nu"])
-    speed = inlet_velocities(s, a_n, times, wf, str(pu["profile"]), r_eq, nu, n_harmonics=int(pu["harmonics"]))
-    flux = speed @ a_n
+    speed = inlet_velocities(s, area, times, wf, str(pu["profile"]), r_eq, nu, n_harmonics=int(pu["harmonics"]))
+    flux = speed @ area
     target = wf(times)
     scale = max(float(np.abs(target).max()), 1e-300)
     bd = case_dir / "constant" / "boundaryData" / name
@@ -191,7 +193,7 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
     for t, u in zip(times, speed):
         d = bd / _fmt_time(float(t))
         d.mkdir()
-        (d / "U").write_text(_vector_list(u[:, None] * n_in[None, :]))
+        (d / "U").write_text(_vector_list(u[:, None] * n_face))
     omega = 2 * math.pi / period
     return {
         "patch": name,
