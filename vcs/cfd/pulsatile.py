@@ -145,9 +145,24 @@ def _vector_list(a: NDArray[np.floating]) -> str:
     return f"{len(a)}\n(\n{body}\n)\n"
 
 
+def boundary_instants(wf: Waveform, samples_per_cycle: int, cycles: int) -> NDArray[np.floating]:
+    """The instants of the inlet boundary data over ``cycles`` cycles (and one sample more): a
+    uniform grid of ``samples_per_cycle`` per cycle (the Womersley profile's shape changes in time)
+    joined with the waveform's own knots, so that OpenFOAM's linear interpolation in time between
+    them gives the waveform's flow rate exactly at every time (its mean too), whatever the grid.
+    Instants closer than 1e-6 of the period are merged (five significant digits of a time folder
+    name would not tell them apart otherwise)."""
+    period = wf.period_s
+    one = np.union1d(np.arange(samples_per_cycle) * (period / samples_per_cycle), wf.time_s[:-1])
+    keep = np.concatenate([[True], np.diff(one) > 1e-6 * period])
+    one = one[keep]
+    times = (one[None, :] + period * np.arange(cycles)[:, None]).ravel()
+    return np.concatenate([times, [cycles * period, cycles * period + period / samples_per_cycle]])
+
+
 def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]) -> dict[str, Any]:
-    """Write ``constant/boundaryData/<inlet>`` (points and U at ``samples_per_cycle`` instants per
-    cycle for ``max_cycles`` cycles) for the ``timeVaryingMappedFixedValue`` inlet.
+    """Write ``constant/boundaryData/<inlet>`` (points, and U at the instants of
+    :func:`boundary_instants` for ``max_cycles`` cycles) for the ``timeVaryingMappedFixedValue`` inlet.
 
     The profile (``cfd.pulsatile.profile``) is :func:`vcs.cfd.womersley.inlet_velocities` on the
     normalised radius of :func:`vcs.cfd.womersley.section_radius` (about the rim's centroid),
@@ -179,7 +194,7 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
     wf = case_waveform(state)
     period = plan["period_s"]
     n_per = int(pu["samples_per_cycle"])
-    times = np.arange(plan["max_cycles"] * n_per + 2) * (period / n_per)
+    times = boundary_instants(wf, n_per, plan["max_cycles"])
     r_eq = math.sqrt(float(area.sum()) / math.pi)
     nu = float(state["cfd"]["physics"]["nu"])
     speed = inlet_velocities(s, area, times, wf, str(pu["profile"]), r_eq, nu, n_harmonics=int(pu["harmonics"]))
