@@ -10,13 +10,21 @@ Public API::
     fields = sample_case("case", model)           # U, p, WSS on the measurement grid
     write_fields(fields, "fields.npz")
 
+    # a cardiac cycle: the waveform CSV (time_s,flow_rate_l_min), whole cycles until periodic
+    render_case("pcase", "wall.stl", {"inlet": {"waveform": "vcs/data/waveforms/ascending_aorta.csv"}})
+    status = run_case("pcase")                    # status["pulsatile"]: cycles, changes, phases
+    fields = sample_pulsatile("pcase", model, status["pulsatile"])   # + TAWSS, OSI, RRT, ECAP, phases
+
 Modules: :mod:`vcs.cfd.openfoam` (defaults, flavour table, detection, templates),
 :mod:`vcs.cfd.sizing` (cell size from the vessel, bounded background box, per-patient inflow),
 :mod:`vcs.cfd.case` (rendering, inlet profile), :mod:`vcs.cfd.run` (run_case: the stages of a
 run, composed), :mod:`vcs.cfd.utilities` (running OpenFOAM utilities: process groups, signals,
 timeouts, failure reasons), :mod:`vcs.cfd.meshing` (meshing, checkMesh, patch check),
 :mod:`vcs.cfd.steady` (SIMPLE, the plateau check), :mod:`vcs.cfd.transient` (the transient
-solve, its time averages and their error bars), :mod:`vcs.cfd.timeseries` (the error bar of a time
+solve, its time averages and their error bars), :mod:`vcs.cfd.pulsatile` (cardiac cycles until
+periodic, the inlet's boundary data), :mod:`vcs.cfd.waveform` (the inflow waveform CSV),
+:mod:`vcs.cfd.womersley` (the analytic Womersley flow; the inlet profile mapped to the inlet's
+shape), :mod:`vcs.cfd.markers` (TAWSS, OSI, RRT, ECAP), :mod:`vcs.cfd.timeseries` (the error bar of a time
 average), :mod:`vcs.cfd.status` (collecting ``status.json``),
 :mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).

@@ -6,6 +6,9 @@
 4. steady solve: simpleFoam start-up and main stage, the plateau check (:mod:`vcs.cfd.steady`);
 5. the transient solve when SIMPLE did not converge: pimpleFoam wash-out and an averaging window
    that ends when its means are known to the tolerance, with their error bars (:mod:`vcs.cfd.transient`);
+   A case with an inflow waveform (``cfd.inlet.waveform``) goes from the mesh to the pulsatile
+   solve instead (:func:`_pulsatile`: the inlet's boundary data, whole cycles until periodic,
+   the kept cycles' markers: :mod:`vcs.cfd.pulsatile`);
 6. [reconstructPar], then convergence, flow rates, the inlet-outlet pressure difference, WSS
    (TAWSS, OSI) and the mesh's prism-layer coverage collected into ``status.json``
    (:mod:`vcs.cfd.status`).
