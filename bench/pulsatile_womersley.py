@@ -77,7 +77,7 @@ def run(root: Path, cell_mm: float) -> dict:
     t, u = last(function_table(case, "probes", "U"))
     e_u = harmonic_errors(t, u @ AXIS, centreline_velocity(t, coeffs, PERIOD, R, NU), PERIOD)
     t, w = last(function_table(case, "wss_wall"))
-    e_w = harmonic_errors(t, w[:, 1:4] @ AXIS, wall_shear_stress(t, coeffs, PERIOD, R, NU), PERIOD)
+    e_w = harmonic_errors(t, -(w[:, 1:4] @ AXIS), wall_shear_stress(t, coeffs, PERIOD, R, NU), PERIOD)
     tawss, osi = tawss_osi(coeffs, PERIOD, R, NU)
     cycles = st["pulsatile"]["cycles"]
     return {
