@@ -93,9 +93,10 @@ DEFAULTS: dict[str, Any] = {
         "max_cycles": 6,  # one more cycle while not periodic, up to this; then not converged
         "periodicity_tolerance": 0.02,  # cycle-to-cycle change of dp and flow waveforms and TAWSS map
         "phases": ["peak_systole", "end_systole", "mid_diastole"],  # instantaneous fields written
-        "max_co": 1.0,  # Courant number limit of the adjustable time step
+        "max_co": 1.0,  # Courant number limit on the cells the flow crosses
+        "max_co_end_cells": 4.0,  # at most this on the slivers snapped at the end planes
         "min_steps_per_cycle": 200,  # largest time step = period / this
-        "outer_correctors": 1,  # PIMPLE outer correctors (1: PISO-like)
+        "outer_correctors": 2,  # PIMPLE outer correctors when some cells run above Co 1
         "probes": [],  # points [x, y, z] m where U and p are recorded at every time step
     },
     "solver": {
@@ -362,6 +363,7 @@ def _check_pulsatile(cfd: dict[str, Any]) -> None:
         raise VCSInputError(f"cfd.pulsatile.max_cycles ({max_cycles}) must not be below cycles ({cycles})")
     _number(cfd, "pulsatile.periodicity_tolerance", 0.0, 1.0, lo_open=True)
     _number(cfd, "pulsatile.max_co", 0.0, 5.0, lo_open=True)
+    _number(cfd, "pulsatile.max_co_end_cells", 0.0, 10.0, lo_open=True)
     _whole(cfd, "pulsatile.min_steps_per_cycle", 10, 1_000_000)
     _whole(cfd, "pulsatile.outer_correctors", 1, 10)
     phases = cfd["pulsatile"]["phases"]

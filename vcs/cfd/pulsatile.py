@@ -31,7 +31,11 @@ incoming flow instead of drawing unbounded inflow through a zero-gradient veloci
 bounded when the deceleration reverses flow at the outlet (diastole).
 
 Time step: adjustable at Courant number ``max_co``, at most ``period / min_steps_per_cycle`` (the
-waveform's instants resolved), recorded per cycle in status.json with its CPU time.
+waveform's instants resolved). From the first phase cut of the first cycle on (peak systole by
+default: the largest flow), the limit is set by the cells the flow crosses, as in the transient
+solve (:func:`vcs.cfd.transient.courant_plan`): the slivers snapping cuts at the end planes (5x the
+interior's Courant number on a demo aorta at peak systole) run up to ``max_co_end_cells`` with
+``outer_correctors``. Recorded per cycle in status.json with its CPU time.
 """
 
 from __future__ import annotations
@@ -55,7 +59,7 @@ from vcs.cfd.foamfiles import (
     read_patch_field,
     read_points,
 )
-from vcs.cfd.transient import _Pimple, _run_stage
+from vcs.cfd.transient import _Pimple, _run_stage, courant_plan
 from vcs.cfd.utilities import Stop, _fmt_time, _Runner, _time_dirs, progress
 from vcs.cfd.waveform import Waveform
 
@@ -432,6 +436,8 @@ def _run_cycle(solve: _Pimple, plan: dict[str, Any], k: int) -> dict[str, Any]:
     cpu = 0.0
     for i, cut in enumerate(cuts):
         parsed = _run_stage(solve, f"cycle{k}.{i}", cut, None, average=True, continue_average=i > 0)
+        if k == 1 and i == 0 and len(cuts) > 1:
+            _end_plane_limit(solve, plan)
         steps += len(parsed["rows"])
         dts += [x for x in (parsed["delta_t_min"], parsed["delta_t_max"]) if x]
         if parsed["courant_max"] is not None:
@@ -452,6 +458,18 @@ def _run_cycle(solve: _Pimple, plan: dict[str, Any], k: int) -> dict[str, Any]:
         "cpu_s": round(cpu, 2) if cpu else round(time.process_time() - t0, 2),
         "wall_s": round(time.perf_counter() - wall0, 2),
     }
+
+
+def _end_plane_limit(solve: _Pimple, plan: dict[str, Any]) -> None:
+    """After the first cut of the first cycle (peak systole by default: the largest flow), the
+    Courant number limit set by the cells the flow crosses (:func:`vcs.cfd.transient.courant_plan`:
+    the slivers snapping cuts at the end planes run up to ``max_co_end_cells``, with
+    ``outer_correctors``), for the rest of the run; recorded in ``status["pulsatile"]["courant"]``."""
+    pu = solve.state["cfd"]["pulsatile"]
+    limits = {k: pu[k] for k in ("max_co", "max_co_end_cells", "outer_correctors")}
+    cour = courant_plan(solve.case_dir, solve.state, solve.run, solve.ranks, solve.root, plan, limits=limits)
+    solve.tr["courant"] = {k: v for k, v in cour.items() if k != "probe_points"}
+    solve.common.update(max_co=cour["pimple_max_co"], outer_correctors=cour["outer_correctors"])
 
 
 def _prune(case_dir: Path, ranks: int, cycles: list[dict[str, Any]], plan: dict[str, Any]) -> None:

@@ -281,7 +281,14 @@ def end_plane_cells(
 
 
 def courant_plan(
-    case_dir: Path, state: dict[str, Any], run: _Runner, ranks: int, root: Path, plan: dict[str, Any]
+    case_dir: Path,
+    state: dict[str, Any],
+    run: _Runner,
+    ranks: int,
+    root: Path,
+    plan: dict[str, Any],
+    *,
+    limits: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The Courant number limit of pimpleFoam, set by the cells the flow crosses, and the probe cells.
 
@@ -296,6 +303,11 @@ def courant_plan(
     ``outer_correctors`` PIMPLE outer correctors (a few cells above Co 1 in the flow extensions,
     outside the measured section).
 
+    ``limits``: ``max_co``, ``max_co_end_cells`` and ``outer_correctors`` (default
+    ``cfd.solver.transient``; a pulsatile run passes ``cfd.pulsatile``'s and calls this on its
+    state at peak systole). The time step of the Courant numbers is the one stored with the state
+    (``<time>/uniform/time``), else the controlDict's (``plan["delta_t_initial_s"]``).
+
     Returns
     -------
     dict
@@ -306,15 +318,20 @@ def courant_plan(
         the SIMPLE state), ``probe_points`` ((N, 3) m: :data:`N_PROBES` cells away from the end
         planes, drawn with probability proportional to their volume, seed 0).
     """
-    tr = state["cfd"]["solver"]["transient"]
+    tr = limits if limits is not None else state["cfd"]["solver"]["transient"]
     t_name = _time_dirs(root)[-1][1]
+    stored = root / t_name / "uniform" / "time"
+    m = re.search(
+        r"^\s*deltaT\s+([-+0-9.eE]+)\s*;", stored.read_text(errors="replace") if stored.exists() else "", re.M
+    )
+    dt_used = float(m.group(1)) if m else float(plan["delta_t_initial_s"])
     funcs = "(CourantNo writeCellCentres writeCellVolumes)"
     if run(["postProcess", "-funcs", funcs, "-time", t_name], "postProcess.courant", ranks).returncode != 0:
         raise Stop(
             "postProcess (CourantNo, cell centres and volumes on the SIMPLE state) failed", "postProcess.courant"
         )
     co, centres, vols = _cell_fields(case_dir, ranks, t_name, ("Co", "C", "V"))
-    per_s = co / float(plan["delta_t_initial_s"])  # the controlDict's deltaT (uniform/time was removed)
+    per_s = co / dt_used  # Co per second of time step
     planes = []
     for p in state["patches"]:
         if p["role"] in ("inlet", "outlet"):
@@ -345,8 +362,9 @@ def courant_plan(
         "probe_points": centres[np.sort(pick)].tolist(),
     }
     progress.info(
-        "Courant number on the SIMPLE state: largest %.3g/s (%d end-plane cells above the %.3g/s of the cells the "
+        "Courant number on the state at %s s: largest %.3g/s (%d end-plane cells above the %.3g/s of the cells the "
         "flow crosses, x%.2f): pimpleFoam maxCo %.3g, %d outer corrector(s), time step ~%.3g s",
+        t_name,
         c_max,
         out["end_plane_cells"],
         c_in,
