@@ -470,11 +470,29 @@ def test_editing_a_patients_waveform_reruns_only_that_patients_cfd(cohort):
     rows.append({"id": "P3", "mesh": "meshes/p3.stl"})
     rows[1]["inflow_waveform"] = "p2.csv"
     cohort.write_sheet(rows)
+    cohort.update_config("cfd", "inlet", "waveform", str(_waveform(cohort.path / "cohort.csv", _good_rows())))
     cohort.fake_finished_run()
     assert cohort.planned_jobs() == set()
     _waveform(cohort.path / "p2.csv", _good_rows(30))  # same file, new content
     cfd = ["openfoam_case", "openfoam_solve", "fields_sample"]
     assert cohort.planned_jobs() == chain(cfd, ["P2"]) | COHORT
+
+
+def test_a_sheet_mixing_steady_and_pulsatile_patients_fails_with_one_line(cohort):
+    _waveform(cohort.path / "p2.csv", _good_rows())
+    rows = [{"id": "P1", "mesh": "meshes/p1.stl"}, {"id": "P2", "mesh": "meshes/p3.stl", "inflow_waveform": "p2.csv"}]
+    cohort.write_sheet(rows)
+    msg = _one_line_error(cohort)
+    assert "P2 have an inflow_waveform (pulsatile) but P1 would be steady" in msg and "never mixes" in msg, msg
+
+
+def test_a_waveform_with_a_flow_rate_fails_with_one_line(cohort):
+    _waveform(cohort.path / "p2.csv", _good_rows())
+    cohort.update_config("cfd", "inlet", "waveform", "p2.csv")
+    row = {"id": "P2", "mesh": "meshes/p3.stl", "inflow_waveform": "p2.csv", "flow_rate_l_min": "4"}
+    cohort.write_sheet([{"id": "P1", "mesh": "meshes/p1.stl"}, row])
+    msg = _one_line_error(cohort)
+    assert "line 4 (id P2): inflow_waveform is applied as given" in msg, msg
 
 
 def test_every_config_string_is_an_enum_or_a_pattern():

@@ -4,7 +4,8 @@ config/pulsatile.yaml (the shipped ascending-aorta waveform) on three CI-sized d
 the patients sheet. The truths: the inflow each patient got (the waveform's mean, scaled by the
 inlet area, or the patient's own file as given), mass conservation over the kept cycle, the marker
 definitions on the VCS grid (RRT, ECAP from TAWSS, OSI), and an atlas with a PCA per marker and
-per phase field. config/pulsatile.yaml at production size is bench/pulsatile_cost.py's."""
+per phase field. config/pulsatile.yaml at production size: bench/bench_cohort.py --configfile
+config/pulsatile.yaml, then bench/pulsatile_table.py (the README's table)."""
 
 from __future__ import annotations
 

@@ -300,6 +300,11 @@ def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
         raise VCSInputError("the patient's inlet velocity needs its valve area (and the other way round)")
     if "flow_rate" in out and "velocity" in out:
         raise VCSInputError("give the patient's inflow either as a flow rate or as velocity + valve area, not both")
+    if "waveform" in out and ("flow_rate" in out or "velocity" in out):
+        raise VCSInputError(
+            "the patient's own inflow waveform is applied as given: "
+            "leave its flow rate (or velocity + valve area) empty"
+        )
     return out
 
 
@@ -562,6 +567,13 @@ def applied_waveform(
     q = applied.mean_m3_s
     inflow.update(
         {
+            # what was applied: the waveform (the steady inflow's jet velocity does not apply)
+            "source": "patient" if own or inflow["source"] == "patient" else "config",
+            "scaling": "patient_waveform"
+            if own
+            else ("patient" if inflow["source"] == "patient" else inflow["scaling"]),
+            "scale_factor": factor,
+            "jet_velocity_m_s": None,
             "flow_rate_m3_s": q,
             "flow_rate_l_min": q * 6e4,
             "mean_inlet_velocity_m_s": q / inlet_area,

@@ -34,6 +34,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vcs.errors import VCSInputError
+
 
 def _time_mean(x: NDArray[np.floating], times: ArrayLike | None) -> NDArray[np.floating]:
     """Mean over axis 0: uniform samples of one period (``times`` None) or the trapezoidal rule."""
@@ -41,7 +43,7 @@ def _time_mean(x: NDArray[np.floating], times: ArrayLike | None) -> NDArray[np.f
         return np.asarray(x.mean(axis=0))
     t = np.asarray(times, dtype=float)
     if t.shape != (x.shape[0],) or len(t) < 2 or np.any(np.diff(t) <= 0):
-        raise ValueError(f"times must be ({x.shape[0]},) and strictly increasing, got shape {t.shape}")
+        raise VCSInputError(f"times must be ({x.shape[0]},) and strictly increasing, got shape {t.shape}")
     return np.asarray(np.trapezoid(x, t, axis=0) / (t[-1] - t[0]))
 
 

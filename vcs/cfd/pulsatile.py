@@ -25,10 +25,12 @@ inflow waveform, ``cfd.inlet.waveform``):
    cycle's phase folders are kept, the rest deleted as the run goes (disk). status.json
    ``pulsatile`` names them; :func:`vcs.cfd.resample.sample_pulsatile` averages and resamples them.
 
-Outlets: the free outflow of the steady case (p = 0; U ``inletOutlet``: zero gradient for outflow,
-U = 0 on faces where the flow reverses). A reverse-flow outlet face thus acts like a wall for the
-incoming flow instead of drawing unbounded inflow through a zero-gradient velocity: the run stays
-bounded when the deceleration reverses flow at the outlet (diastole).
+Outlets: the free outflow of the steady case (p = 0; U ``inletOutlet``: zero gradient where the
+flow leaves, U = 0 on faces where it enters). The flux through a reversing outlet face is still
+set by the pressure equation (it must be: the shipped waveform has a net end-systolic backflow,
+which the outlet has to supply), but the fluid it lets in carries no momentum into the domain:
+no inflow jet builds up through a zero-gradient velocity, and the run stays bounded through the
+deceleration and the backflow.
 
 Time step: adjustable at Courant number ``max_co``, at most ``period / min_steps_per_cycle`` (the
 waveform's instants resolved). From the first phase cut of the first cycle on (peak systole by
@@ -235,8 +237,9 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
 
 
 def cycle_records(case_dir: Path, state: dict[str, Any], start: float, end: float) -> dict[str, NDArray[np.floating]]:
-    """The inlet-outlet pressure difference (kinematic) and the inlet and outlet flow rates of one
-    cycle, linearly interpolated on ``N_PHASE`` phase points (fraction of the cycle)."""
+    """The inlet-outlet pressure difference (kinematic), the inlet flow rate and each outlet's
+    (``q_outlets``, (n_outlets, N_PHASE)) and their sum of one cycle, linearly interpolated on
+    ``N_PHASE`` phase points (fraction of the cycle)."""
     phase = (np.arange(N_PHASE) + 0.5) / N_PHASE
     tq = start + phase * (end - start)
 
@@ -253,11 +256,13 @@ def cycle_records(case_dir: Path, state: dict[str, Any], start: float, end: floa
     outl = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
     p_in = np.mean([series(f"pressure_{n}") for n in inl], axis=0)
     p_out = np.mean([series(f"pressure_{n}") for n in outl], axis=0)
+    q_outlets = np.array([series(f"flowRate_{n}") for n in outl])
     return {
         "phase": phase,
         "dp": p_in - p_out,
         "q_in": -np.sum([series(f"flowRate_{n}") for n in inl], axis=0),
-        "q_out": np.sum([series(f"flowRate_{n}") for n in outl], axis=0),
+        "q_out": q_outlets.sum(axis=0),
+        "q_outlets": q_outlets,
     }
 
 
@@ -266,10 +271,13 @@ def cycle_change(prev: dict[str, Any], cur: dict[str, Any], area: NDArray[np.flo
     quantitative on three quantities):
 
         dp:    max_phi |dp_k(phi) - dp_{k-1}(phi)| / max_phi |dp_k(phi)|
-        flow:  max_phi |Q_out,k(phi) - Q_out,k-1(phi)| / max_phi |Q_in,k(phi)|
+        flow:  max_o max_phi |Q_o,k(phi) - Q_o,k-1(phi)| / max_phi |Q_in,k(phi)|  (o: each outlet)
         tawss: sqrt(sum_f A_f (TAWSS_k - TAWSS_{k-1})^2 / sum_f A_f TAWSS_k^2)
 
-    with phi the phase in the cycle and f the wall faces (TAWSS of each cycle alone).
+    with phi the phase in the cycle and f the wall faces (TAWSS of each cycle alone). The flow
+    check is on each outlet: with one outlet, incompressibility makes its flow the prescribed
+    inflow at every instant (the check is then met to the solver's tolerance); with several it
+    is the split between them that has to settle.
 
     Parameters
     ----------
@@ -280,7 +288,7 @@ def cycle_change(prev: dict[str, Any], cur: dict[str, Any], area: NDArray[np.flo
     """
     a, b = prev["records"], cur["records"]
     dp = float(np.abs(b["dp"] - a["dp"]).max() / max(np.abs(b["dp"]).max(), 1e-300))
-    flow = float(np.abs(b["q_out"] - a["q_out"]).max() / max(np.abs(b["q_in"]).max(), 1e-300))
+    flow = float(np.abs(b["q_outlets"] - a["q_outlets"]).max() / max(np.abs(b["q_in"]).max(), 1e-300))
     t0, t1 = prev["tawss"], cur["tawss"]
     tawss = float(np.sqrt((area * (t1 - t0) ** 2).sum() / max((area * t1**2).sum(), 1e-300)))
     return {"dp": dp, "flow": flow, "tawss": tawss}
@@ -349,21 +357,46 @@ def pulsatile_solve(
     pu: dict[str, Any] = {"solver": "pimpleFoam", "evaluated": False, **plan}
     status["pulsatile"] = pu
     status["criterion"] = (
-        f"periodic: cycle-to-cycle change of the pressure difference and flow waveforms and of the TAWSS map "
-        f"< {plan['tolerance']:g} (relative), after at least {plan['cycles']} cycles, at most {plan['max_cycles']}"
+        f"periodic: cycle-to-cycle change of the pressure difference and outlet flow waveforms and of the TAWSS "
+        f"map < {plan['tolerance']:g} (relative), after at least {plan['cycles']} cycles, at most {plan['max_cycles']}"
     )
     status["criterion_used"] = "none"
-    root = case_dir / "processor0" if ranks > 1 else case_dir
-    common = {
-        "transient": True,
-        "residual_control": False,
-        "delta_t": _fmt_time(plan["delta_t_initial_s"]),
-        "max_delta_t": _fmt_time(plan["max_delta_t_s"]),
-        "max_co": plan["max_co"],
-        "outer_correctors": plan["outer_correctors"],
-        "probe_points": state["cfd"]["pulsatile"].get("probes") or None,
-    }
-    solve = _Pimple(case_dir, state, run, ranks, root, common, pu)
+    solve = _Pimple(case_dir, state, run, ranks, case_dir / "processor0" if ranks > 1 else case_dir, {}, pu)
+    solve.common.update(
+        transient=True,
+        residual_control=False,
+        delta_t=_fmt_time(plan["delta_t_initial_s"]),
+        max_delta_t=_fmt_time(plan["max_delta_t_s"]),
+        max_co=plan["max_co"],
+        outer_correctors=plan["outer_correctors"],
+        probe_points=state["cfd"]["pulsatile"].get("probes") or None,
+    )
+    cycles, changes, periodic = _run_until_periodic(solve, plan)
+    kept = cycles[-plan["keep_cycles"] :]
+    pu.update(
+        {
+            "evaluated": True,
+            "cycles_run": len(cycles),
+            "periodic": periodic,
+            "changes": changes,
+            "cycles": [{k2: v for k2, v in c.items() if k2 not in ("records", "tawss")} for c in cycles],
+            "kept_cycles": [c["index"] for c in kept],
+            "window": [kept[0]["start"], kept[-1]["end"]],
+            "mean_times": [c["end_name"] for c in kept],
+            "phases": _phase_record(state, plan, cycles[-1]),
+        }
+    )
+    _plot(case_dir, cycles, plan)
+    _verdict(status, plan, len(cycles), changes, periodic)
+    return pu
+
+
+def _run_until_periodic(
+    solve: _Pimple, plan: dict[str, Any]
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]], bool]:
+    """Cycles until periodic (at least ``cycles``, at most ``max_cycles``): (the cycles' records,
+    the cycle-to-cycle changes, periodic)."""
+    case_dir, state, ranks = solve.case_dir, solve.state, solve.ranks
     area = _wall_areas(case_dir, state, ranks)
     period = plan["period_s"]
     cycles: list[dict[str, Any]] = []
@@ -378,7 +411,7 @@ def pulsatile_solve(
             ch = cycle_change(cycles[-2], cycle, area)
             changes.append({"cycle": k, **ch})
             progress.info(
-                "cycle %d: change from cycle %d: pressure difference %.2f%%, flow %.2f%%, TAWSS %.2f%% "
+                "cycle %d: change from cycle %d: pressure difference %.2f%%, outlet flow %.2f%%, TAWSS %.2f%% "
                 "(tolerance %.2g%%)",
                 k,
                 k - 1,
@@ -391,34 +424,23 @@ def pulsatile_solve(
         _prune(case_dir, ranks, cycles, plan)
         if periodic:
             break
-    kept = cycles[-plan["keep_cycles"] :]
-    pu.update(
-        {
-            "evaluated": True,
-            "cycles_run": len(cycles),
-            "periodic": periodic,
-            "changes": changes,
-            "cycles": [{k2: v for k2, v in c.items() if k2 not in ("records", "tawss")} for c in cycles],
-            "kept_cycles": [c["index"] for c in kept],
-            "window": [kept[0]["start"], kept[-1]["end"]],
-            "mean_times": [c["end_name"] for c in kept],
-            "phases": _phase_record(case_dir, state, plan, cycles[-1]),
-        }
-    )
-    _plot(case_dir, cycles, plan)
+    return cycles, changes, periodic
+
+
+def _verdict(
+    status: dict[str, Any], plan: dict[str, Any], n_cycles: int, changes: list[dict[str, Any]], periodic: bool
+) -> None:
+    """``converged``, ``criterion_used`` and the reason of a pulsatile run."""
     if periodic:
-        status["converged"] = True
-        status["criterion_used"] = "periodic_cycles"
-        status["reason"] = None
-    else:
-        last = changes[-1] if changes else {"dp": math.inf, "flow": math.inf, "tawss": math.inf}
-        status["converged"] = False
-        status["reason"] = (
-            f"not periodic after {len(cycles)} cycles (cfd.pulsatile.max_cycles): the last cycle-to-cycle change "
-            f"is pressure difference {100 * last['dp']:.2f}%, flow {100 * last['flow']:.2f}%, TAWSS "
-            f"{100 * last['tawss']:.2f}% (tolerance {100 * plan['tolerance']:.2g}%); raise max_cycles"
-        )
-    return pu
+        status.update(converged=True, criterion_used="periodic_cycles", reason=None)
+        return
+    last = changes[-1] if changes else {"dp": math.inf, "flow": math.inf, "tawss": math.inf}
+    status["converged"] = False
+    status["reason"] = (
+        f"not periodic after {n_cycles} cycles (cfd.pulsatile.max_cycles): the last cycle-to-cycle change "
+        f"is pressure difference {100 * last['dp']:.2f}%, outlet flow {100 * last['flow']:.2f}%, TAWSS "
+        f"{100 * last['tawss']:.2f}% (tolerance {100 * plan['tolerance']:.2g}%); raise max_cycles"
+    )
 
 
 def _run_cycle(solve: _Pimple, plan: dict[str, Any], k: int) -> dict[str, Any]:
@@ -427,7 +449,7 @@ def _run_cycle(solve: _Pimple, plan: dict[str, Any], k: int) -> dict[str, Any]:
     and continued across the cuts. Returns the cycle's record (times, steps, CPU)."""
     period = plan["period_s"]
     start, end = (k - 1) * period, k * period
-    cuts = [start + off for off in plan["phases"].values() if 0 < off < period] + [end]
+    cuts = sorted({start + off for off in plan["phases"].values() if 0 < off < period}) + [end]
     t0 = time.process_time()
     wall0 = time.perf_counter()
     steps = 0
@@ -483,20 +505,20 @@ def _prune(case_dir: Path, ranks: int, cycles: list[dict[str, Any]], plan: dict[
             shutil.rmtree(root / name, ignore_errors=True)
 
 
-def _phase_record(
-    case_dir: Path, state: dict[str, Any], plan: dict[str, Any], last: dict[str, Any]
-) -> dict[str, dict[str, Any]]:
-    """The phase instants of the last cycle: solver time and folder, offset in the cycle, flow rate."""
+def _phase_record(state: dict[str, Any], plan: dict[str, Any], last: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The phase instants of the last cycle: solver time and folder, offset in the cycle, flow rate.
+    A phase at the cycle's start (offset 0, e.g. the peak of a waveform that starts at its maximum)
+    is the cycle's end (the same phase of a periodic flow), whose folder is written anyway."""
     wf = case_waveform(state)
     out = {}
-    names = iter(last["cut_names"])
+    cut_offsets = sorted({off for off in plan["phases"].values() if 0 < off < plan["period_s"]})
+    folder = dict(zip(cut_offsets, last["cut_names"]))
     for name, off in plan["phases"].items():
-        if not 0 < off < plan["period_s"]:
-            continue
+        inside = 0 < off < plan["period_s"]
         out[name] = {
-            "time_s": last["start"] + off,
-            "time_name": next(names),
-            "phase_s": off,
+            "time_s": last["start"] + off if inside else last["end"],
+            "time_name": folder[off] if inside else last["end_name"],
+            "phase_s": off if inside else 0.0,
             "flow_rate_m3_s": float(wf(off)),
         }
     return out

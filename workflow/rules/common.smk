@@ -239,6 +239,11 @@ def load_patients(sheet):
             if column in record:
                 _check_file(record[column], sheet, n, pid, column)
         if "inflow_waveform" in record:
+            if "flow_rate_l_min" in record or "inlet_velocity_m_s" in record:
+                fail(
+                    f"patients sheet '{sheet}' line {n} (id {pid}): inflow_waveform is applied as given; "
+                    "leave flow_rate_l_min and inlet_velocity_m_s empty for this patient"
+                )
             _check_waveform(record["inflow_waveform"], f"patients sheet '{sheet}' line {n} (id {pid}): inflow_waveform")
         patients[pid] = {c: record.get(c) for c in SHEET_COLUMNS} | {"units": record.get("units", "auto")}
     return patients
@@ -255,6 +260,16 @@ if config["cfd"].get("inlet", {}).get("waveform"):
     _check_waveform(_wf, "cfd.inlet.waveform")
 PATIENTS = load_patients(config["patients"])
 PATIENT_IDS = sorted(PATIENTS)
+if not config["cfd"].get("inlet", {}).get("waveform"):
+    _pulsatile = sorted(p for p, row in PATIENTS.items() if row.get("inflow_waveform"))
+    if _pulsatile and len(_pulsatile) < len(PATIENTS):
+        _steady = sorted(set(PATIENTS) - set(_pulsatile))
+        fail(
+            f"patients sheet '{config['patients']}': {', '.join(_pulsatile[:5])}{' ...' if len(_pulsatile) > 5 else ''} "
+            f"have an inflow_waveform (pulsatile) but {', '.join(_steady[:5])}{' ...' if len(_steady) > 5 else ''} "
+            "would be steady (cfd.inlet.waveform is null): an atlas never mixes them; give every patient a "
+            "waveform or set cfd.inlet.waveform"
+        )
 
 
 wildcard_constraints:
