@@ -368,7 +368,7 @@ def pulsatile_solve(
         delta_t=_fmt_time(plan["delta_t_initial_s"]),
         max_delta_t=_fmt_time(plan["max_delta_t_s"]),
         max_co=plan["max_co"],
-        outer_correctors=plan["outer_correctors"],
+        outer_correctors=plan["outer_correctors"] if plan["max_co"] > 1.0 else 1,  # PISO-like at Co <= 1
         probe_points=state["cfd"]["pulsatile"].get("probes") or None,
     )
     cycles, changes, periodic = _run_until_periodic(solve, plan)
