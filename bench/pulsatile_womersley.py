@@ -3,7 +3,7 @@
 mesh sizes: the amplitude and phase errors of the centreline velocity and of the wall shear stress
 over the cycle, TAWSS and OSI (a waveform with flow reversal), and the cost per cycle.
 
-    .venv/bin/python bench/pulsatile_womersley.py -d DIR [--cells 0.75 0.5 0.375] [--json out.json]
+    .venv/bin/python bench/pulsatile_womersley.py -d DIR [--cells 0.75 0.5] [--steps 200 800] [--json out.json]
 
 The case of tests/workflow/test_pulsatile.py (radius 5 mm, length 50 mm, Q(t) = Q0 (1 + 1.5 sin
 wt), Q0 = 2 mL/s, period 0.4 s: Womersley number 10.8, nu 3.37e-6 m2/s, Womersley inlet profile,
@@ -45,8 +45,8 @@ def waveform_csv(path: Path, n: int = 200) -> Path:
     return path
 
 
-def run(root: Path, cell_mm: float) -> dict:
-    case = root / f"cell_{cell_mm:g}mm"
+def run(root: Path, cell_mm: float, steps: int) -> dict:
+    case = root / f"cell_{cell_mm:g}mm" if steps == 200 else root / f"cell_{cell_mm:g}mm_{steps}steps"
     status = case / "status.json"
     if not status.exists():
         root.mkdir(parents=True, exist_ok=True)
@@ -60,6 +60,7 @@ def run(root: Path, cell_mm: float) -> dict:
                 "discard_cycles": 1,
                 "max_cycles": 4,
                 "samples_per_cycle": 80,
+                "min_steps_per_cycle": steps,
                 "probes": [[0.0, 0.0, LENGTH / 2]],
             },
         }
@@ -82,6 +83,7 @@ def run(root: Path, cell_mm: float) -> dict:
     cycles = st["pulsatile"]["cycles"]
     return {
         "cell_mm": cell_mm,
+        "min_steps_per_cycle": steps,
         "cells": st["cells"],
         "converged": st["converged"],
         "cycles_run": st["pulsatile"]["cycles_run"],
@@ -99,10 +101,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-d", "--dir", required=True, help="working folder (a finished case is re-read)")
     ap.add_argument("--cells", type=float, nargs="+", default=[0.75, 0.5], help="cell sizes, mm")
+    ap.add_argument(
+        "--steps", type=int, nargs="+", default=[200], help="cfd.pulsatile.min_steps_per_cycle (time step T / steps)"
+    )
     ap.add_argument("--json", help="also write the rows here")
     args = ap.parse_args(argv)
     os.environ.setdefault("WM_PROJECT_DIR", "/usr/share/openfoam")
-    rows = [run(Path(args.dir).resolve(), c) for c in args.cells]
+    rows = [run(Path(args.dir).resolve(), c, n) for c in args.cells for n in args.steps]
     print(
         "| cell (mm) | cells | steps/cycle | CPU s/cycle | u_c mean / amp (%) / phase (deg) "
         "| WSS mean / amp (%) / phase (deg) | TAWSS (%) | OSI (exact) |"
