@@ -30,6 +30,7 @@ PULSATILE_CI = {
             "discard_cycles": 1,
             "max_cycles": 3,
             "periodicity_tolerance": 0.25,  # coarse meshes, one wash-in cycle: CI checks the chain
+            "tawss_tolerance": 0.25,
             "samples_per_cycle": 40,
             "min_steps_per_cycle": 40,
             "max_co": 2.0,

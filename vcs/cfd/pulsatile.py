@@ -17,8 +17,11 @@ inflow waveform, ``cfd.inlet.waveform``):
 3. periodicity, after every cycle from the second on: the cycle-to-cycle change of the inlet-outlet
    pressure difference waveform, of the outlet flow rate waveform (both on a common phase grid,
    relative to their cycle's largest magnitude) and of the TAWSS map (area-weighted L2, relative):
-   :func:`cycle_change`. Periodic when all three are below ``periodicity_tolerance`` once at least
-   ``cycles`` have run; one more cycle otherwise, up to ``max_cycles``; not periodic then:
+   :func:`cycle_change`. Periodic when the waveforms' changes are below ``periodicity_tolerance``
+   and the map's below ``tawss_tolerance`` once at least ``cycles`` have run (the diastolic vortices
+   of a real aorta decay over R^2/nu, about a minute: its TAWSS map changed 4-6 % per cycle at
+   cycles 2-4 on demo aortas while the waveforms were periodic to 0.1 %);
+   one more cycle otherwise, up to ``max_cycles``; not periodic then:
    ``converged`` false with the changes as the reason;
 4. the result: the last ``cycles - discard_cycles`` cycles are kept (the first ``discard_cycles``
    are the wash-in from rest); their cycle-mean fields (each cycle's end folder) and the last
@@ -117,6 +120,7 @@ def pulsatile_plan(state: dict[str, Any]) -> dict[str, Any]:
         "keep_cycles": cycles - discard,
         "max_cycles": int(pu["max_cycles"]),
         "tolerance": float(pu["periodicity_tolerance"]),
+        "tawss_tolerance": float(pu["tawss_tolerance"]),
         "phases": dict(sorted(phases.items(), key=lambda kv: kv[1])),
         "max_delta_t_s": max_dt,
         "delta_t_initial_s": max_dt / 20.0,
@@ -357,8 +361,9 @@ def pulsatile_solve(
     pu: dict[str, Any] = {"solver": "pimpleFoam", "evaluated": False, **plan}
     status["pulsatile"] = pu
     status["criterion"] = (
-        f"periodic: cycle-to-cycle change of the pressure difference and outlet flow waveforms and of the TAWSS "
-        f"map < {plan['tolerance']:g} (relative), after at least {plan['cycles']} cycles, at most {plan['max_cycles']}"
+        f"periodic: cycle-to-cycle change of the pressure difference and outlet flow waveforms < {plan['tolerance']:g}"
+        f" and of the TAWSS map < {plan['tawss_tolerance']:g} (relative), after at least {plan['cycles']} cycles, "
+        f"at most {plan['max_cycles']}"
     )
     status["criterion_used"] = "none"
     solve = _Pimple(case_dir, state, run, ranks, case_dir / "processor0" if ranks > 1 else case_dir, {}, pu)
@@ -411,20 +416,26 @@ def _run_until_periodic(
             ch = cycle_change(cycles[-2], cycle, area)
             changes.append({"cycle": k, **ch})
             progress.info(
-                "cycle %d: change from cycle %d: pressure difference %.2f%%, outlet flow %.2f%%, TAWSS %.2f%% "
-                "(tolerance %.2g%%)",
+                "cycle %d: change from cycle %d: pressure difference %.2f%%, outlet flow %.2f%% (tolerance %.2g%%), "
+                "TAWSS %.2f%% (tolerance %.2g%%)",
                 k,
                 k - 1,
                 100 * ch["dp"],
                 100 * ch["flow"],
-                100 * ch["tawss"],
                 100 * plan["tolerance"],
+                100 * ch["tawss"],
+                100 * plan["tawss_tolerance"],
             )
-            periodic = k >= plan["cycles"] and max(ch.values()) <= plan["tolerance"]
+            periodic = k >= plan["cycles"] and _periodic(ch, plan)
         _prune(case_dir, ranks, cycles, plan)
         if periodic:
             break
     return cycles, changes, periodic
+
+
+def _periodic(change: dict[str, float], plan: dict[str, Any]) -> bool:
+    """The waveforms within ``periodicity_tolerance`` and the TAWSS map within ``tawss_tolerance``."""
+    return max(change["dp"], change["flow"]) <= plan["tolerance"] and change["tawss"] <= plan["tawss_tolerance"]
 
 
 def _verdict(
@@ -438,8 +449,9 @@ def _verdict(
     status["converged"] = False
     status["reason"] = (
         f"not periodic after {n_cycles} cycles (cfd.pulsatile.max_cycles): the last cycle-to-cycle change "
-        f"is pressure difference {100 * last['dp']:.2f}%, outlet flow {100 * last['flow']:.2f}%, TAWSS "
-        f"{100 * last['tawss']:.2f}% (tolerance {100 * plan['tolerance']:.2g}%); raise max_cycles"
+        f"is pressure difference {100 * last['dp']:.2f}%, outlet flow {100 * last['flow']:.2f}% (tolerance "
+        f"{100 * plan['tolerance']:.2g}%), TAWSS {100 * last['tawss']:.2f}% (tolerance "
+        f"{100 * plan['tawss_tolerance']:.2g}%); raise max_cycles"
     )
 
 
