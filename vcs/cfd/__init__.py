@@ -24,7 +24,8 @@ timeouts, failure reasons), :mod:`vcs.cfd.meshing` (meshing, checkMesh, patch ch
 solve, its time averages and their error bars), :mod:`vcs.cfd.pulsatile` (cardiac cycles until
 periodic, the inlet's boundary data), :mod:`vcs.cfd.waveform` (the inflow waveform CSV),
 :mod:`vcs.cfd.womersley` (the analytic Womersley flow; the inlet profile mapped to the inlet's
-shape), :mod:`vcs.cfd.markers` (TAWSS, OSI, RRT, ECAP), :mod:`vcs.cfd.timeseries` (the error bar of a time
+shape), :mod:`vcs.cfd.markers` (TAWSS, OSI, RRT, ECAP), :mod:`vcs.cfd.outlets` (Murray's law and the
+three-element Windkessel: not yet wired into cases), :mod:`vcs.cfd.timeseries` (the error bar of a time
 average), :mod:`vcs.cfd.status` (collecting ``status.json``),
 :mod:`vcs.cfd.foamfiles` (polyMesh, logs, postProcessing readers), :mod:`vcs.cfd.resample`
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
