@@ -501,7 +501,13 @@ def _end_plane_limit(solve: _Pimple, plan: dict[str, Any]) -> None:
     ``outer_correctors``), for the rest of the run; recorded in ``status["pulsatile"]["courant"]``."""
     pu = solve.state["cfd"]["pulsatile"]
     limits = {k: pu[k] for k in ("max_co", "max_co_end_cells", "outer_correctors")}
-    cour = courant_plan(solve.case_dir, solve.state, solve.run, solve.ranks, solve.root, plan, limits=limits)
+    try:
+        cour = courant_plan(solve.case_dir, solve.state, solve.run, solve.ranks, solve.root, plan, limits=limits)
+    except (Stop, OSError, ValueError) as exc:  # a cheaper time step is not worth a failed run
+        reason = exc.reason if isinstance(exc, Stop) else f"{type(exc).__name__}: {exc}"
+        progress.warning("end-plane Courant limit not set (%s): every cell stays at Co %g", reason, pu["max_co"])
+        solve.tr["courant"] = {"error": reason, "pimple_max_co": solve.common["max_co"]}
+        return
     solve.tr["courant"] = {k: v for k, v in cour.items() if k != "probe_points"}
     solve.common.update(max_co=cour["pimple_max_co"], outer_correctors=cour["outer_correctors"])
 
