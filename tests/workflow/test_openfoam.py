@@ -904,7 +904,7 @@ def test_jet_transient_window_ends_once_its_means_are_known(tmp_path, caplog, mo
     lines = [r.getMessage() for r in caplog.records if r.name == "vcs.cfd.run"]
     assert any(ln.startswith("steady SIMPLE not converged") and "transient solve" in ln for ln in lines)
     assert any(ln.startswith("averaging window: means known to the tolerance after") for ln in lines), lines
-    assert any(ln.startswith("Courant number on the SIMPLE state") for ln in lines)
+    assert any(ln.startswith("Courant number on the state at") for ln in lines)
 
 
 @pytest.mark.openfoam
