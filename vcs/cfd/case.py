@@ -59,7 +59,7 @@ def _jinja_env(flavour: str) -> jinja2.Environment:
 
 
 def patch_role(name: str) -> str:
-    """Role of an STL solid / patch from its name: inlet*, outlet*, wall* or other.
+    """Role of an STL solid / patch from its name: inlet*, outlet* or branch* (an outlet), wall* or other.
 
     Parameters
     ----------
@@ -74,7 +74,7 @@ def patch_role(name: str) -> str:
     n = name.lower()
     if n.startswith("inlet"):
         return "inlet"
-    if n.startswith("outlet"):
+    if n.startswith(("outlet", "branch")):
         return "outlet"
     if n.startswith("wall"):
         return "wall"

@@ -30,6 +30,12 @@ from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line 
 
 # --------------------------------------------------------------------------- parameters
 
+GEOMETRIES = ("model", "surface")
+"""``cfd.geometry``: the Eq. 8 model wall, or the patient's own surface (:mod:`vcs.lumen`)."""
+
+OUTLET_TYPES = ("free", "murray", "rcr")
+"""``cfd.outlets.type``."""
+
 DEFAULTS: dict[str, Any] = {
     "flavour": None,  # None = detect the installed OpenFOAM; "esi" (v1912/openfoam.com) or "org10"
     "ranks": 1,  # MPI ranks for simpleFoam (1 = serial); decomposition below
@@ -66,6 +72,20 @@ DEFAULTS: dict[str, Any] = {
         "max_local_cells": 2_000_000,
         "max_global_cells": 20_000_000,
         "inside_point": None,  # [x, y, z] inside the lumen; None = automatic (from the inlet)
+    },
+    # the lumen the CFD runs on: "model" (the Eq. 8 model wall, one outlet) or "surface" (the
+    # patient's own surface with every end a patch: inlet, outlet and branch_<k>; vcs.lumen)
+    "geometry": "model",
+    "outlets": {
+        # free: p = 0 on every outlet; murray: every branch_<k> takes fraction r_k^3 / sum r^3 of
+        # the inflow, the main outlet (p = 0) the rest; rcr: a three-element Windkessel per outlet
+        "type": "free",
+        "rcr": {
+            "resistance": 1.33e8,  # total peripheral resistance [Pa s/m3] (~100 mmHg / 6 L/min), split by Murray's law
+            "compliance": 1.0e-8,  # total compliance [m3/Pa] (~1.3 mL/mmHg), split by Murray's law
+            "proximal_fraction": 0.09,  # R_p / (R_p + R_d) of every outlet
+            "distal_pressure": 0.0,  # P_d [Pa] (the pressures are relative: p = 0 is P_d)
+        },
     },
     "physics": {
         "nu": 3.37e-6,  # kinematic viscosity [m2/s] (Newtonian blood)
@@ -274,6 +294,12 @@ def check_cfd(cfd: dict[str, Any]) -> None:
             "cfd.solver.fallback 'average' (averaging SIMPLE iterates) was removed: it is not a time average; "
             "use 'transient' (pimpleFoam, time-averaged fields) or 'none'"
         )
+    _word(cfd, "geometry", GEOMETRIES)
+    _word(cfd, "outlets.type", OUTLET_TYPES)
+    _number(cfd, "outlets.rcr.resistance", 0.0, 1e13, lo_open=True)
+    _number(cfd, "outlets.rcr.compliance", 0.0, 1e-3, lo_open=True)
+    _number(cfd, "outlets.rcr.proximal_fraction", 0.0, 1.0, hi_open=True)
+    _number(cfd, "outlets.rcr.distal_pressure", -1e6, 1e6)
     _word(cfd, "inlet.type", INLET_TYPES)
     _word(cfd, "inlet.scaling", INFLOW_SCALINGS)
     _number(cfd, "inlet.reference_inlet_area", 0.0, 1.0, lo_open=True)
