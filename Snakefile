@@ -4,7 +4,8 @@
 #   snakemake --profile profiles/local --configfile config/ci.yaml
 #   snakemake --report results/report.html             # after a run
 #
-# Per patient (results/patients/<id>/): vcs_fit -> vcs_wall -> openfoam_case -> openfoam_solve
+# Per patient (results/patients/<id>/): vcs_fit -> vcs_wall (or vcs_lumen: cfd geometry surface)
+# -> openfoam_case -> openfoam_solve
 # -> fields_sample; then atlas_build over the cohort (results/atlas/), atlas_complete (exit status:
 # non-zero with one line when a patient is not in the atlas) and results/provenance.json.
 

@@ -277,6 +277,17 @@ def render_files(case_dir: Path, state: dict[str, Any], files: list[str], **extr
         out.write_text(env.get_template(rel).render(**ctx))
 
 
+def _end_plane(tris: NDArray[np.floating], role: str) -> dict[str, Any]:
+    """Area centroid (m) and unit outward normal of an inlet / outlet / branch solid (empty for a wall)."""
+    if role not in ("inlet", "outlet"):
+        return {}
+    s = 0.5 * triangle_cross(tris)
+    a = np.linalg.norm(s, axis=1)
+    c = (tris.mean(axis=1) * a[:, None]).sum(0) / max(float(a.sum()), 1e-300)
+    n = s.sum(0) / max(float(np.linalg.norm(s.sum(0))), 1e-300)
+    return {"center_m": [float(x) for x in c], "normal_out": [float(x) for x in n]}
+
+
 def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
     """The per-patient values of :func:`render_case`, checked (one-line VCSInputError)."""
     out: dict[str, Any] = {}
@@ -403,6 +414,10 @@ def render_case(
         sizes = vessel_sizes(model)  # type: ignore[arg-type]
     else:
         sizes = stl_sizes(solids, roles)
+    # a surface geometry's side branches (branch_<k>): every branch end is sized too
+    sizes["branch_diameters_m"] = {
+        k: 2.0 * float(np.sqrt(surface_area(t) / np.pi)) for k, t in solids.items() if k.lower().startswith("branch")
+    }
     volume = closed_volume(solids)
     sizing = choose_cell_size(m, sizes, volume, override=own.get("cell_size"))
     h = sizing["cell_size_m"]
@@ -486,6 +501,7 @@ def render_case(
                 "patch_type": "wall" if roles[name] == "wall" else "patch",
                 "level": level[roles[name]],
                 "area_m2": surface_area(t),
+                **_end_plane(t, roles[name]),
                 "cell_size_m": hb / 2 ** level[roles[name]][1],
             }
             for name, t in solids.items()

@@ -1,4 +1,4 @@
-"""Command line: `vcs fit|ends|coords|cartesian|wall|grid|phantom|sensitivity`.
+"""Command line: `vcs fit|ends|coords|cartesian|wall|grid|lumen|phantom|sensitivity`.
 
 Bad input ends with one line on stderr naming the problem and the fix, and exit code 2; running
 out of memory is exit code 3 (not the input's fault: a coarser mesh or grid, or more memory).
@@ -20,6 +20,7 @@ from vcs._signals import signals_held
 from vcs.cli._args import join_point_values
 from vcs.cli.ends import add_commands as add_ends_commands
 from vcs.cli.fit import add_commands as add_fit_commands
+from vcs.cli.lumen import add_commands as add_lumen_commands
 from vcs.cli.phantom import add_commands as add_phantom_commands
 from vcs.cli.points import add_commands as add_points_commands
 from vcs.cli.sensitivity import add_commands as add_sensitivity_commands
@@ -33,6 +34,7 @@ _COMMAND_GROUPS = (
     add_points_commands,
     add_phantom_commands,
     add_wall_commands,
+    add_lumen_commands,
     add_sensitivity_commands,
 )
 

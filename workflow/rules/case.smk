@@ -6,7 +6,7 @@ rule openfoam_case:
     conda:
         "../envs/vcs.yaml"
     input:
-        stl="results/patients/{id}/wall/wall.stl",
+        stl=case_stl,  # the model wall (cfd geometry model) or the patient's lumen (surface)
         model="results/patients/{id}/fit/model.json",  # sizes the mesh (cfd.mesh.cell_size: auto)
         waveform=waveform_input,  # the inflow waveform CSV of a pulsatile run (none: steady)
     output:

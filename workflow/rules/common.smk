@@ -19,6 +19,7 @@ DEMO_MESH = re.compile(r"results/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<s
 SHEET_COLUMNS = (
     "id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap",
     "cell_size_mm", "flow_rate_l_min", "inlet_velocity_m_s", "valve_area_cm2", "inflow_waveform",
+    "cfd_geometry",
 )
 # optional per-patient CFD columns: number in the sheet's unit -> (key of vcs.cfd.render_case's
 # `patient`, factor to SI); cell_size_mm may also be `auto`
@@ -137,6 +138,19 @@ def _check_waveform(path, where):
         load_waveform(path)
     except VCSInputError as exc:
         fail(f"{where}: {exc}")
+
+
+def cfd_geometry(wildcards):
+    """The lumen the patient's CFD runs on: the sheet's cfd_geometry, else cfd.geometry (model)."""
+    return PATIENTS[wildcards.id].get("cfd_geometry") or config["cfd"].get("geometry", "model")
+
+
+def case_stl(wildcards):
+    """The closed multi-solid STL the case is meshed from: the Eq. 8 model wall (geometry model) or
+    the patient's own lumen with every end a patch (geometry surface, rule vcs_lumen)."""
+    if cfd_geometry(wildcards) == "surface":
+        return f"results/patients/{wildcards.id}/lumen/lumen.stl"
+    return f"results/patients/{wildcards.id}/wall/wall.stl"
 
 
 def waveform_input(wildcards):
@@ -288,6 +302,11 @@ def fit_input(wildcards):
     if row["inlet_cap"]:
         files.update(inlet_cap=row["inlet_cap"], outlet_cap=row["outlet_cap"])
     return files
+
+
+def lumen_input(wildcards):
+    """The patient's mesh and its model.json (the section's ends) for rule vcs_lumen."""
+    return {"mesh": PATIENTS[wildcards.id]["mesh"], "model": f"results/patients/{wildcards.id}/fit/model.json"}
 
 
 def fit_ends(wildcards):

@@ -81,3 +81,25 @@ rule vcs_wall:
         " -- {output:q} || vcs wall {input.model:q} -o {output.stl:q} --units m {params.n_tau} --n-theta {params.n_theta}"
         " --extend-inlet {params.extend_inlet} --extend-outlet {params.extend_outlet} > {log:q} 2>&1"
         " || python \"$VCS_FAILURE_SCRIPT\" record wall $? --patient {wildcards.id} --log {log:q} -- {output:q}"
+
+
+rule vcs_lumen:
+    conda:
+        "../envs/vcs.yaml"
+    # cfd geometry surface: the patient's own surface closed into a lumen, every end a patch (inlet at
+    # the section's tau = 0, outlet at tau = 1, branch_<k> the others), in metres (vcs.lumen). A failed
+    # fit is passed on; a surface that cannot be made a lumen is recorded like a failed wall.
+    input:
+        unpack(lumen_input),
+    output:
+        stl="results/patients/{id}/lumen/lumen.stl",
+        ends="results/patients/{id}/lumen/ends.json",
+    log:
+        "results/logs/vcs_lumen/{id}.log",
+    benchmark:
+        "results/benchmarks/vcs_lumen/{id}.tsv"
+    shell:
+        "python \"$VCS_FAILURE_SCRIPT\" propagate --patient {wildcards.id} --log {log:q} --upstream {input.model:q}"
+        " -- {output:q} || vcs lumen {input.mesh:q} --model {input.model:q} -o {output.stl:q} --ends {output.ends:q}"
+        " --units m > {log:q} 2>&1"
+        " || python \"$VCS_FAILURE_SCRIPT\" record lumen $? --patient {wildcards.id} --log {log:q} -- {output:q}"
