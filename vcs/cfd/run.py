@@ -165,7 +165,28 @@ def _new_status(case_dir: Path, state: dict[str, Any], version: str | None) -> d
         "nu": cfd["physics"]["nu"],
         "mesh": {"sizing": state.get("mesh_sizing")},  # the cell size and why (render_case)
         "inflow": state.get("inflow"),  # the flow rate applied and why (render_case)
+        "geometry": _geometry(state),
     }
+
+
+def _geometry(state: dict[str, Any]) -> dict[str, Any]:
+    """The lumen the case was meshed from (``cfd.geometry``) and its ends: name, role (inlet, outlet
+    = the section's tau = 1 end, branch), area-centroid ``center_m``, ``area_m2``, equivalent radius."""
+    ends = []
+    for s in state["solids"]:
+        if s["role"] not in ("inlet", "outlet"):
+            continue
+        role = "branch" if s["name"].lower().startswith("branch") else s["role"]
+        ends.append(
+            {
+                "name": s["name"],
+                "role": role,
+                "center_m": s.get("center_m"),
+                "area_m2": s["area_m2"],
+                "equivalent_radius_m": float(np.sqrt(s["area_m2"] / np.pi)),
+            }
+        )
+    return {"type": state["cfd"].get("geometry", "model"), "stl": state.get("stl_source"), "ends": ends}
 
 
 def _start(case_dir: Path, state: dict[str, Any], status: dict[str, Any], installed: str | None) -> _Runner:

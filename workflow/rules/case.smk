@@ -14,6 +14,7 @@ rule openfoam_case:
     params:
         cfd=cfd_params(),
         patient=patient_cfd,
+        geometry=cfd_geometry,  # model or surface (the sheet's cfd_geometry, else cfd.geometry)
     log:
         "results/logs/openfoam_case/{id}.log",
     benchmark:

@@ -31,6 +31,7 @@ def main(smk):
     cfd = json.loads(json.dumps(dict(smk.params.cfd)))  # plain dicts/lists
     patient = json.loads(json.dumps(dict(smk.params.patient)))
     flavour = cfd.pop("flavour", "auto")
+    cfd["geometry"] = smk.params.geometry  # the patient's (recorded in status.json "geometry")
     try:
         state = render_case(
             smk.output.case,
