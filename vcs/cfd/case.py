@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from vcs.vessel import VesselModel
 
 #: per-patient values render_case accepts (SI units), e.g. from the patients sheet
-PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area", "waveform")
+PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area", "waveform", "outlets")
 
 STL_NAME = "vessel.stl"
 CASE_JSON = "vcsflow_case.json"
@@ -299,6 +299,9 @@ def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
         if k == "cell_size":
             out[k] = cell_size_value(v, "the patient's cell size")
             continue
+        if k == "outlets":  # the patient's outlet conditions, over cfd.outlets
+            out[k] = _patient_outlets(v)
+            continue
         if k == "waveform":  # the patient's own inflow waveform (a CSV path), checked when loaded
             if not isinstance(v, (str, Path)):
                 raise VCSInputError(f"the patient's inflow waveform must be the path of a CSV file, not {v!r}")
@@ -316,6 +319,47 @@ def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
             "the patient's own inflow waveform is applied as given: "
             "leave its flow rate (or velocity + valve area) empty"
         )
+    return out
+
+
+#: the per-patient outlet values (``patient["outlets"]``) and their ranges (as in check_cfd)
+_PATIENT_RCR = {
+    "resistance": (0.0, 1e13, "Pa s/m3", True),
+    "compliance": (0.0, 1e-3, "m3/Pa", True),
+    "proximal_fraction": (0.0, 1.0, "R_p / (R_p + R_d)", False),
+    "distal_pressure": (-1e6, 1e6, "Pa", False),
+}
+
+
+def _patient_outlets(v: Any) -> dict[str, Any]:
+    """The patient's ``outlets`` (``type`` and/or ``rcr`` totals, as ``cfd.outlets``), checked;
+    None values are left out (the config's apply)."""
+    from vcs.cfd.outlets import OUTLET_TYPES
+
+    if not isinstance(v, dict):
+        raise VCSInputError(f"the patient's outlets must be a dict (type, rcr), not {v!r}")
+    unknown = set(v) - {"type", "rcr"}
+    if unknown:
+        raise VCSInputError(f"unknown key(s) in the patient's outlets: {', '.join(sorted(unknown))}; known: type, rcr")
+    out: dict[str, Any] = {}
+    if v.get("type") is not None:
+        if v["type"] not in OUTLET_TYPES:
+            known = ", ".join(OUTLET_TYPES)
+            raise VCSInputError(f"the patient's outlet type must be one of {known}, not {v['type']!r}")
+        out["type"] = v["type"]
+    rcr = v.get("rcr") or {}
+    if not isinstance(rcr, dict) or set(rcr) - set(_PATIENT_RCR):
+        raise VCSInputError(f"the patient's outlets.rcr must be a dict with keys among {', '.join(_PATIENT_RCR)}")
+    for key, x in rcr.items():
+        if x is None:
+            continue
+        lo, hi, unit, lo_open = _PATIENT_RCR[key]
+        ok = isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+        if not ok or not ((x > lo if lo_open else x >= lo) and (x < hi if key == "proximal_fraction" else x <= hi)):
+            raise VCSInputError(
+                f"the patient's outlets.rcr.{key} must be a number in [{lo:g}, {hi:g}] ({unit}), not {x!r}"
+            )
+        out.setdefault("rcr", {})[key] = float(x)
     return out
 
 
@@ -387,6 +431,8 @@ def render_case(
     cfd["flavour"] = flavour
     check_cfd(cfd)
     own = _patient_values(patient)
+    if "outlets" in own:
+        cfd["outlets"] = deep_merge(cfd["outlets"], own["outlets"])
     fl = FLAVOURS[flavour]
 
     solids = read_stl_solids(stl_path)
@@ -438,7 +484,7 @@ def render_case(
     # inflow: the patient's, or the config's (fixed or scaled by the inlet area)
     inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
     inflow = choose_inflow(
-        cfd["inlet"], inlet_area, patient={k2: own[k2] for k2 in own if k2 not in ("cell_size", "waveform")}
+        cfd["inlet"], inlet_area, patient={k2: own[k2] for k2 in own if k2 not in ("cell_size", "waveform", "outlets")}
     )
     waveform = applied_waveform(cfd["inlet"], inflow, own.get("waveform"), inlet_area)
     d_in = 2.0 * np.sqrt(inlet_area / np.pi)
@@ -448,6 +494,7 @@ def render_case(
     if inflow["jet_velocity_m_s"] is not None:
         cfd["inlet"]["velocity"] = inflow["jet_velocity_m_s"]
 
+    outlets = case_outlets(solids, roles, cfd, inflow["flow_rate_m3_s"], waveform)
     jet = jet_region(solids, cfd, background=hb, min_level=k)
     finest = max(
         [k, *level["wall"], *level["inlet"], *level["outlet"], *level["other"]] + ([jet["level"]] if jet else [])
@@ -506,7 +553,11 @@ def render_case(
             }
             for name, t in solids.items()
         ],
-        "patches": [{"name": k2, "role": roles[k2]} for k2 in solids] + [{"name": "background", "role": "other"}],
+        "patches": [
+            {"name": k2, "role": roles[k2]} | ({"outlet": outlets[k2]} if k2 in outlets else {}) for k2 in solids
+        ]
+        + [{"name": "background", "role": "other"}],
+        "outlets": list(outlets.values()),
         "flow_rate": inflow["flow_rate_m3_s"],
         "stl_bounds": [[float(x) for x in world.min(0)], [float(x) for x in world.max(0)]],
         "jet_region": jet,
@@ -531,6 +582,36 @@ def render_case(
     state["files"] = list(fl["files"]) + [f"{fl['geometry_dir']}/{STL_NAME}"]
     (case_dir / CASE_JSON).write_text(json.dumps(state, indent=2))
     return state
+
+
+def case_outlets(
+    solids: dict[str, NDArray[np.floating]],
+    roles: dict[str, str],
+    cfd: dict[str, Any],
+    flow_rate: float,
+    waveform: dict[str, Any] | None,
+) -> dict[str, dict[str, Any]]:
+    """The outlet plan of a case (:func:`vcs.cfd.outlets.outlet_plan` on the STL's outlet solids
+    and their areas), by patch name; a pulsatile case's murray branches also get ``flow_table``:
+    their share of the applied waveform over ``max_cycles + 1`` cycles
+    (:func:`vcs.cfd.outlets.flow_table`), so that the split holds at every instant."""
+    from vcs.cfd.outlets import flow_table, outlet_plan
+
+    names = [n for n in solids if roles[n] == "outlet"]
+    plan = outlet_plan(
+        names,
+        [surface_area(solids[n]) for n in names],
+        cfd["outlets"],
+        flow_rate=flow_rate,
+        rho=float(cfd["physics"]["rho"]),
+    )
+    for o in plan:
+        if waveform is not None and o["bc_u"] == "flowRateOutletVelocity":
+            cycles = int(cfd["pulsatile"]["max_cycles"]) + 1
+            o["flow_table"] = flow_table(
+                waveform["time_s"], waveform["flow_m3_s"], waveform["period_s"], float(o["target_fraction"]), cycles
+            )
+    return {str(o["name"]): o for o in plan}
 
 
 # --------------------------------------------------------------------------- inflow waveform

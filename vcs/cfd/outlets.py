@@ -41,6 +41,7 @@ compliant arterial models. Int J Numer Method Biomed Eng 30:204-231.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -433,3 +434,145 @@ def rcr_periodic_pressure(
     tt = np.asarray(t, dtype=float)
     phase = np.exp(1j * omega * np.multiply.outer(tt, n))  # (..., N + 1)
     return np.asarray(pd + np.real(phase @ zq))
+
+
+# --------------------------------------------------------------------------- the outlet plan of a case
+
+OUTLET_TYPES = ("free", "murray", "rcr")
+"""``cfd.outlets.type`` (also :data:`vcs.cfd.openfoam.OUTLET_TYPES`)."""
+
+STEADY_RELAXATION = 0.3
+"""Under-relaxation of a resistance outlet's pressure in a steady (SIMPLE) run and its transient
+fallback: ``p <- p + a (R Q - p)`` at every evaluation. The explicit coupling ``p = R Q`` (Q of the
+last iteration) amplifies a change of the flow split between outlets by about R over the lumen's
+own resistance, which can exceed 1 for SIMPLE's pressure correction; relaxed, a single outlet
+converges as (1 - a)^n to p = R Q."""
+
+
+def outlet_role(name: str) -> str:
+    """``"main"`` for an ``outlet*`` end (the section's tau = 1 end), ``"branch"`` for ``branch*``."""
+    return "branch" if name.lower().startswith("branch") else "main"
+
+
+def outlet_plan(
+    names: list[str],
+    areas: ArrayLike,
+    outlets: dict[str, Any],
+    *,
+    flow_rate: float,
+    rho: float,
+) -> list[dict[str, Any]]:
+    """The boundary condition of every outlet of a case, from ``cfd.outlets`` (plain JSON dicts).
+
+    * ``free``: every outlet at p = 0 (U ``inletOutlet``).
+    * ``murray``: every branch prescribes its Murray share (Murray 1926) of the inflow,
+      ``Q_k = f_k Q_in`` with ``f_k = r_k^3 / sum_j r_j^3`` over **all** outlets (the main ones
+      included; :func:`murray_fractions`), through ``flowRateOutletVelocity`` (p zero gradient);
+      the main outlet(s) at p = 0 take the rest (their own Murray share when the split holds).
+    * ``rcr``: every outlet a three-element Windkessel (Westerhof et al. 2009) from
+      :func:`split_rcr` (the totals split by Murray's law):
+      ``P = R_p Q + P_c,  C dP_c/dt = Q - (P_c - P_d)/R_d``; a steady run sees ``R_p + R_d``.
+
+    Parameters
+    ----------
+    names : list of str
+        The outlet patches (``outlet*`` main, ``branch*`` branches).
+    areas : (n,) float
+        Their areas, m^2.
+    outlets : dict
+        ``cfd.outlets`` (``type``, ``rcr``: ``resistance``, ``compliance``, ``proximal_fraction``,
+        ``distal_pressure``), checked.
+    flow_rate : float
+        The (mean) inflow, m^3/s.
+    rho : float
+        Density, kg/m^3: OpenFOAM's kinematic values are the SI ones over rho (pressures,
+        resistances) or times rho (compliance).
+
+    Returns
+    -------
+    list of dict
+        Per outlet, in the order of ``names``: ``name``, ``role`` (main | branch), ``type``,
+        ``area_m2``, ``target_fraction`` (murray and rcr: f_k; free: None), ``bc_u``
+        (``inletOutlet`` | ``flowRateOutletVelocity``), ``bc_p`` (``fixedValue`` |
+        ``zeroGradient`` | ``rcr``); murray branches ``flow_rate_m3_s`` (the mean target);
+        rcr ``r_p``, ``c``, ``r_d`` (SI), ``p_distal_pa``, ``kinematic`` (``r_p``, ``r_d``,
+        ``tau`` = R_d C (s), ``p_distal``, ``p_c0`` = P_d + R_d f_k Q_in: the capacitor's
+        mean-flow state, its initial value).
+    """
+    a = np.asarray(areas, dtype=float)
+    kind = str(outlets.get("type", "free"))
+    if kind not in OUTLET_TYPES:
+        raise VCSInputError(f"outlet type {kind!r} is not one of {', '.join(OUTLET_TYPES)}")
+    roles = [outlet_role(n) for n in names]
+    if kind == "murray" and "main" not in roles:
+        raise VCSInputError(
+            "murray outlets need a main outlet (an 'outlet' solid at p = 0 taking the rest of the flow); "
+            f"found only {', '.join(names)}"
+        )
+    fractions = murray_fractions(a) if kind != "free" else np.full(len(names), np.nan)
+    rcr = split_rcr_of(outlets, a) if kind == "rcr" else None
+    plan: list[dict[str, Any]] = []
+    for i, (name, role) in enumerate(zip(names, roles)):
+        o: dict[str, Any] = {
+            "name": name,
+            "role": role,
+            "type": kind,
+            "area_m2": float(a[i]),
+            "target_fraction": None if kind == "free" else float(fractions[i]),
+            "bc_u": "inletOutlet",
+            "bc_p": "fixedValue",
+        }
+        if kind == "murray" and role == "branch":
+            o.update(bc_u="flowRateOutletVelocity", bc_p="zeroGradient", flow_rate_m3_s=float(fractions[i]) * flow_rate)
+        elif rcr is not None:
+            o.update(_rcr_entry(rcr[i], outlets, flow_rate, rho))
+        plan.append(o)
+    return plan
+
+
+def split_rcr_of(outlets: dict[str, Any], areas: ArrayLike) -> list[dict[str, float]]:
+    """:func:`split_rcr` of the ``cfd.outlets.rcr`` totals."""
+    r = outlets.get("rcr") or {}
+    return split_rcr(
+        r["resistance"], r["compliance"], areas, proximal_fraction=r.get("proximal_fraction", DEFAULT_PROXIMAL_FRACTION)
+    )
+
+
+def _rcr_entry(k: dict[str, float], outlets: dict[str, Any], flow_rate: float, rho: float) -> dict[str, object]:
+    """The rcr fields of one outlet of :func:`outlet_plan` (SI and kinematic)."""
+    r = outlets.get("rcr") or {}
+    p_d = _finite("the distal pressure", r.get("distal_pressure", 0.0), "Pa")
+    p_c0 = p_d + k["r_d"] * k["fraction"] * flow_rate
+    return {
+        "bc_p": "rcr",
+        "r_p": k["r_p"],
+        "c": k["c"],
+        "r_d": k["r_d"],
+        "p_distal_pa": p_d,
+        "kinematic": {
+            "r_p": k["r_p"] / rho,
+            "r_d": k["r_d"] / rho,
+            "tau": k["r_d"] * k["c"],
+            "p_distal": p_d / rho,
+            "p_c0": p_c0 / rho,
+            "relaxation": STEADY_RELAXATION,
+        },
+    }
+
+
+def flow_table(
+    time_s: ArrayLike, flow_m3_s: ArrayLike, period: float, fraction: float, cycles: int
+) -> list[list[float]]:
+    """A branch's prescribed flow over ``cycles`` cycles as (t, Q) rows: ``fraction`` times the
+    waveform at its own knots, repeated (linear interpolation between the rows is then the
+    fraction of the periodic piecewise-linear waveform at every instant, as OpenFOAM's Function1
+    ``table`` interpolates). An exact zero is nudged to 1e-12 of the largest |Q| (the sign kept):
+    ``flowRateOutletVelocity`` divides by the target flow."""
+    t = np.asarray(time_s, dtype=float)
+    q = fraction * np.asarray(flow_m3_s, dtype=float)
+    tiny = 1e-12 * max(float(np.abs(q).max()), 1e-300)
+    q = np.where(np.abs(q) < tiny, np.where(q < 0, -tiny, tiny), q)
+    one_t, one_q = t[:-1], q[:-1]  # the last knot is the next cycle's first
+    times = np.concatenate([one_t + k * period for k in range(cycles)] + [[cycles * period]])
+    flows = np.concatenate([one_q] * cycles + [[q[0]]])
+    return [[float(a), float(b)] for a, b in zip(times, flows)]
