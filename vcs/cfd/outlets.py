@@ -576,3 +576,65 @@ def flow_table(
     times = np.concatenate([one_t + k * period for k in range(cycles)] + [[cycles * period]])
     flows = np.concatenate([one_q] * cycles + [[q[0]]])
     return [[float(a), float(b)] for a, b in zip(times, flows)]
+
+
+def pressure_outlets(patches: list[dict[str, Any]]) -> list[str]:
+    """The outlets whose pressure the inlet-outlet pressure difference takes: the main outlet(s)
+    (``outlet*``) when there are any, else every outlet. With branches, dp is the inlet's
+    area-mean pressure minus the main outlet's: a branch's pressure (prescribed flow, or its own
+    Windkessel) is not the pressure at the end of the section the atlas measures."""
+    outs = [str(p["name"]) for p in patches if p["role"] == "outlet"]
+    main = [n for n in outs if outlet_role(n) == "main"]
+    return main or outs
+
+
+def outlet_summary(
+    plan: list[dict[str, Any]],
+    flows: dict[str, float | None],
+    pressures: dict[str, float | None],
+    inflow: float | None,
+    rho: float,
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """status.json ``outlets`` (one entry per outlet of ``plan``) and the outlet mass balance.
+
+    Parameters
+    ----------
+    plan : list of dict
+        :func:`outlet_plan` of the case.
+    flows : dict
+        Achieved flow rate per patch (m^3/s, out of the domain positive; mean over the window).
+    pressures : dict
+        Area-mean kinematic pressure per patch (m^2/s^2; mean over the window).
+    inflow : float or None
+        Flow rate into the domain through the inlet(s), m^3/s (> 0).
+    rho : float
+        Density, kg/m^3.
+
+    Returns
+    -------
+    outlets : list of dict
+        ``name``, ``role``, ``type``, ``area_m2``, ``flow_rate_m3_s``, ``fraction`` (of the inflow),
+        ``target_fraction``, ``mean_pressure_pa``; rcr: ``r_p``, ``c``, ``r_d`` (SI).
+    balance : dict
+        ``inflow_m3_s``, ``outflow_m3_s`` (sum over the outlets), ``relative`` ((out - in) / in).
+    """
+    out = []
+    for o in plan:
+        q, p = flows.get(o["name"]), pressures.get(o["name"])
+        entry = {k: o.get(k) for k in ("name", "role", "type", "area_m2", "target_fraction")}
+        entry |= {
+            "flow_rate_m3_s": q,
+            "fraction": q / inflow if q is not None and inflow else None,
+            "mean_pressure_pa": p * rho if p is not None else None,
+        }
+        if o.get("bc_p") == "rcr":
+            entry |= {k: o[k] for k in ("r_p", "c", "r_d", "p_distal_pa")}
+        out.append(entry)
+    q_out = [e["flow_rate_m3_s"] for e in out]
+    total = float(sum(float(q) for q in q_out if q is not None)) if q_out and None not in q_out else None
+    balance = {
+        "inflow_m3_s": inflow,
+        "outflow_m3_s": total,
+        "relative": (total - inflow) / inflow if total is not None and inflow else None,
+    }
+    return out, balance

@@ -241,7 +241,8 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
 
 
 def cycle_records(case_dir: Path, state: dict[str, Any], start: float, end: float) -> dict[str, NDArray[np.floating]]:
-    """The inlet-outlet pressure difference (kinematic), the inlet flow rate and each outlet's
+    """The inlet-outlet pressure difference (kinematic; the main outlet's pressure when there are
+    branches: :func:`vcs.cfd.outlets.pressure_outlets`), the inlet flow rate and each outlet's
     (``q_outlets``, (n_outlets, N_PHASE)) and their sum of one cycle, linearly interpolated on
     ``N_PHASE`` phase points (fraction of the cycle)."""
     phase = (np.arange(N_PHASE) + 0.5) / N_PHASE
@@ -256,10 +257,12 @@ def cycle_records(case_dir: Path, state: dict[str, Any], start: float, end: floa
             raise Stop(f"function object {name} recorded fewer than 2 values in the cycle {start:g}-{end:g} s")
         return np.interp(tq, s[m, 0], s[m, 1])
 
+    from vcs.cfd.outlets import pressure_outlets
+
     inl = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
     outl = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
     p_in = np.mean([series(f"pressure_{n}") for n in inl], axis=0)
-    p_out = np.mean([series(f"pressure_{n}") for n in outl], axis=0)
+    p_out = np.mean([series(f"pressure_{n}") for n in pressure_outlets(state["patches"])], axis=0)
     q_outlets = np.array([series(f"flowRate_{n}") for n in outl])
     return {
         "phase": phase,

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from vcs.cfd.case import patch_role
 from vcs.cfd.foamfiles import (
+    function_series,
     last_function_value,
     oscillatory_shear_index,
     parse_solver_log,
@@ -21,7 +22,11 @@ from vcs.cfd.foamfiles import (
     read_patch_field,
     window_mean,
 )
+from vcs.cfd.outlets import outlet_plan, outlet_summary, pressure_outlets
 from vcs.cfd.utilities import _latest_time
+
+N_WAVEFORM = 200
+"""Phase points of an rcr outlet's last-cycle flow and pressure waveforms in status.json."""
 
 
 def _json_safe(obj: Any) -> Any:
@@ -93,6 +98,7 @@ def collect(
     """
     _collect_logs(case_dir, status, logs)
     _collect_patches(case_dir, status, state, window)
+    _collect_outlets(case_dir, status, state, window)
     _collect_wall_shear(case_dir, status, state)
 
 
@@ -145,16 +151,57 @@ def _collect_patches(
     pin = {p["name"]: fo_value(f"pressure_{p['name']}") for p in state["patches"] if p["role"] in ("inlet", "outlet")}
     status["patch_pressure"] = pin
     pi = [v for k, v in pin.items() if patch_role(k) == "inlet" and v is not None]
-    po = [v for k, v in pin.items() if patch_role(k) == "outlet" and v is not None]
+    main = pressure_outlets(state["patches"])
+    po = [v for k, v in pin.items() if k in main and v is not None]
     if pi and po:
         dp = pi[0] - float(np.mean(po))
         status["inlet_minus_outlet_pressure"] = {
             "kinematic_m2s2": dp,
             "Pa": dp * rho,
-            "definition": "area-mean p on the inlet minus the mean of the outlets' area-mean p"
+            "definition": "area-mean p on the inlet minus the mean of the main outlets' area-mean p"
+            + (f" ({', '.join(main)}; the branches left out)" if len(main) < len(pin) - len(pi) else "")
             + (" (time-weighted over the averaging window)" if window is not None else ""),
             "pressure_recovery": bool(dp < 0),  # p rises downstream (e.g. after the jet): not a drop
         }
+
+
+def _collect_outlets(
+    case_dir: Path,
+    status: dict[str, Any],
+    state: dict[str, Any],
+    window: tuple[float, float] | None,
+) -> None:
+    """status.json ``outlets`` (per outlet: flow, fraction of the inflow and its target, mean
+    pressure; rcr: R_p, C, R_d and, pulsatile, the last cycle's flow and pressure waveforms) and
+    ``outlet_mass_balance`` (:func:`vcs.cfd.outlets.outlet_summary`), from the flow rates and
+    pressures :func:`_collect_patches` put in ``status`` (means over the window)."""
+    plan = state.get("outlets")
+    if plan is None:  # a state rendered before the outlet plan: free outlets
+        areas = {s["name"]: s["area_m2"] for s in state.get("solids", [])}
+        names = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
+        plan = outlet_plan(names, [areas.get(n, 1.0) for n in names], {"type": "free"}, flow_rate=1.0, rho=1.0)
+    flows = status.get("flow_rates") or {}
+    q_in = -sum(v for k, v in flows.items() if v is not None and patch_role(k) == "inlet")
+    rho = float(state["cfd"]["physics"]["rho"])
+    outlets, balance = outlet_summary(plan, flows, status.get("patch_pressure") or {}, q_in or None, rho)
+    wf = state.get("waveform")
+    if wf and window is not None:
+        t1 = float(window[1])
+        phase = (np.arange(N_WAVEFORM) + 0.5) / N_WAVEFORM
+        tq = t1 - float(wf["period_s"]) * (1.0 - phase)
+        for o in outlets:
+            if o["type"] != "rcr":
+                continue
+            q = function_series(case_dir, f"flowRate_{o['name']}")
+            p = function_series(case_dir, f"pressure_{o['name']}")
+            if len(q) and len(p):
+                o["last_cycle"] = {
+                    "phase": [float(x) for x in phase],
+                    "flow_rate_m3_s": [float(x) for x in np.interp(tq, q[:, 0], q[:, 1])],
+                    "pressure_pa": [float(x) * rho for x in np.interp(tq, p[:, 0], p[:, 1])],
+                }
+    status["outlets"] = outlets
+    status["outlet_mass_balance"] = balance
 
 
 def _collect_wall_shear(case_dir: Path, status: dict[str, Any], state: dict[str, Any]) -> None:

@@ -406,8 +406,10 @@ def _state_change(
 ) -> dict[str, float]:
     """Relative change of the inlet-outlet pressure difference, the area-mean |WSS| and U (volume
     L2) between two written SIMPLE states (time folders ``d0`` and ``d1``, solver times t0, t1)."""
+    from vcs.cfd.outlets import pressure_outlets
+
     inlets = [p["name"] for p in state["patches"] if p["role"] == "inlet"]
-    outlets = [p["name"] for p in state["patches"] if p["role"] == "outlet"]
+    outlets = pressure_outlets(state["patches"])  # the main outlets when there are branches
 
     def series(name: str) -> dict[int, float]:
         ser = function_series(case_dir, f"pressure_{name}")

@@ -586,9 +586,12 @@ class AverageWatch:
 
 
 def _dp_names(state: dict[str, Any]) -> tuple[list[str], list[str]]:
-    """The function-object names of the inlet and of the outlet patch pressures."""
+    """The function-object names of the inlet and of the outlet patch pressures (the main outlets
+    when there are branches: :func:`vcs.cfd.outlets.pressure_outlets`)."""
+    from vcs.cfd.outlets import pressure_outlets
+
     inlets = [f"pressure_{p['name']}" for p in state["patches"] if p["role"] == "inlet"]
-    outlets = [f"pressure_{p['name']}" for p in state["patches"] if p["role"] == "outlet"]
+    outlets = [f"pressure_{n}" for n in pressure_outlets(state["patches"])]
     return inlets, outlets
 
 
