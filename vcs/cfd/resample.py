@@ -21,6 +21,26 @@ frame (``U_vcs``, ``WSS_vcs``: components along t(tau), e_theta = -v1 sin theta 
 e_rho = v1 cos theta + v2 sin theta), which are invariant to rigid motions and are what the atlas
 compares across patients.
 
+Ostia. A case run on the patient's own lumen (``cfd.geometry: surface``) has side branches the
+single-branch model wall bridges over: at an ostium the closest CFD wall point of a wall grid
+point lies on the ostium's rim or down the branch, and its WSS is not the section's. Such wall
+grid points are marked ``ostium`` (:func:`ostium_mask`, criterion :data:`OSTIUM_CRITERION`) and
+their wall values (WSS, WSS_vcs, WSS_kinematic, TAWSS, OSI, hence RRT and ECAP, and every phase's
+WSS) are NaN, never a number taken from the branch. A wall point is at an ostium when
+
+* its closest CFD wall point is farther than :data:`OSTIUM_GAP` = 0.15 rho_w(tau, theta) (on the
+  model wall that distance is a fraction of a cell; on the patient's own surface it is the fit
+  residual: at most 0.12 rho_w, 99.5 % below 0.08 rho_w on the branch-free real aortas), or
+* the CFD wall's normal there makes more than 60 degrees with the model wall's normal
+  (:data:`OSTIUM_NORMAL_COS` = cos 60 deg; at least 0.82 on the branch-free real aortas, about 0
+  on a branch's wall: this catches the points near the rim whose closest point is up the
+  branch).
+
+U (no-slip: 0), p and the interior (rho_n < 1) samples are not masked. A lumen without branches
+gets no mask. The mask, the distance (``wall_gap``, in rho_w) and the normals' cosine
+(``wall_normal_cos``) are in fields.npz, the count in its summary (:func:`summary`); the atlas
+leaves the masked cells out of every wall field's PCA (:mod:`vcs.atlas.cohort`).
+
 A time-averaged case (the transient fallback of :func:`vcs.cfd.run.run_case`) is sampled from
 its means (UMean, pMean, wallShearStressMean) under the same names U, p, WSS, plus TAWSS and OSI
 on the wall (:func:`read_case`).
@@ -43,6 +63,7 @@ from scipy.spatial import cKDTree
 from vcs.cfd.foamfiles import oscillatory_shear_index
 from vcs.errors import VCSInputError
 from vcs.grid import GRID_DEFAULTS, grid_axes, grid_points, grid_to_vtk, local_frame, to_vcs_components
+from vcs.mesh import vertex_normals
 
 if TYPE_CHECKING:
     import pyvista as pv
@@ -272,6 +293,164 @@ def mls_interpolate(
     return out[:, 0] if squeeze else out
 
 
+# ---------------------------------------------------------------------------------------------
+# The wall: WSS and markers at the wall grid points, ostia masked
+# ---------------------------------------------------------------------------------------------
+#: A wall grid point is at an ostium when its closest CFD wall point is farther than this many
+#: rho_w(tau, theta). Branch-free real aortas fitted with the defaults (vmtk closed segment,
+#: SimVascular segment; grids 64 x 32 and 128 x 64): at most 0.12 (99.5 % below 0.08); a
+#: snapped model-wall case: a fraction of a cell (< 0.06 at 8 cells per radius). Inside an ostium
+#: the distance grows to the branch radius (0.3-0.7 rho_w on AortaCFD patient1, VMR 0154, the
+#: vmtk bifurcation), so only a band of 0.15 rho_w (under one cell of the default 64 x 32 grid on
+#: an aorta, 2 pi / 32 = 0.2 rho_w) along the rim is left to the normal criterion.
+OSTIUM_GAP = 0.15
+#: ... or when |n_cfd . n_model| < this (the CFD wall at the closest point turned by more than
+#: 60 degrees from the model wall): on the branch-free real aortas the cosine is at least 0.82,
+#: on a branch's wall about 0; it marks the points near the rim whose closest point lies up the
+#: branch wall (where a curved main wall meets the branch, at the ostium's sides).
+OSTIUM_NORMAL_COS = 0.5
+#: The criterion in words (fields.npz ``ostium_criterion``, the summary, the atlas).
+OSTIUM_CRITERION = (
+    "a wall grid point (rho_n = 1) is at an ostium when its closest CFD wall point is farther than "
+    "{gap:g} rho_w(tau, theta), or the CFD wall's normal there and the model wall's normal have "
+    "|cos| < {cos:g}; its wall values (WSS, TAWSS, OSI, RRT, ECAP, phase WSS) are NaN"
+)
+
+
+def model_wall_normals(
+    model: VesselModel, tau: NDArray[np.floating], theta: NDArray[np.floating]
+) -> NDArray[np.floating]:
+    """Unit normals of the Eq. 8 wall x(tau, theta) on a (tau, theta) grid, by central differences.
+
+    Parameters
+    ----------
+    model : VesselModel
+        With a wall model (mm).
+    tau : (n_tau,) float
+        In [0, 1] (one-sided differences at the ends).
+    theta : (n_theta,) float, rad
+
+    Returns
+    -------
+    (n_tau, n_theta, 3) float
+        Unit normals (orientation: dx/dtau x dx/dtheta, outward for a right-handed frame).
+    """
+    T, TH = np.meshgrid(tau, theta, indexing="ij")
+    h = 1e-5
+    dt = model.surface_points(np.clip(T + h, 0, 1), TH) - model.surface_points(np.clip(T - h, 0, 1), TH)
+    dth = model.surface_points(T, TH + h) - model.surface_points(T, TH - h)
+    n = np.cross(dt, dth)
+    return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+
+
+def ostium_mask(
+    gap: NDArray[np.floating],
+    normal_cos: NDArray[np.floating],
+    *,
+    max_gap: float = OSTIUM_GAP,
+    min_normal_cos: float = OSTIUM_NORMAL_COS,
+) -> NDArray[np.bool_]:
+    """Wall grid points at an ostium (:data:`OSTIUM_CRITERION`).
+
+    Parameters
+    ----------
+    gap : (...) float
+        Distance from each model wall point to its closest CFD wall point, in rho_w(tau, theta).
+    normal_cos : (...) float
+        |n_cfd . n_model|: the CFD wall's unit normal there (interpolated vertex normals) against
+        the model wall's (:func:`model_wall_normals`).
+    max_gap : float
+        :data:`OSTIUM_GAP` (in rho_w).
+    min_normal_cos : float
+        :data:`OSTIUM_NORMAL_COS`.
+
+    Returns
+    -------
+    (...) bool
+        True at an ostium.
+    """
+    return (np.asarray(gap) > max_gap) | (np.asarray(normal_cos) < min_normal_cos)
+
+
+def _sample_wall(
+    wall: pv.PolyData,
+    model: VesselModel,
+    tau: NDArray[np.floating],
+    theta: NDArray[np.floating],
+    points: NDArray[np.floating],
+    rho_w: NDArray[np.floating],
+    frame: NDArray[np.floating],
+    *,
+    rho_density: float,
+    wss_name: str,
+    gap: float,
+    normal_cos: float,
+) -> dict[str, Any]:
+    """WSS (and TAWSS, OSI of a time-averaged case) at the wall grid points ``points``
+    (n_tau, n_theta, 3, case units) from their closest points on the wall patch, NaN at an ostium
+    (:func:`ostium_mask`; ``rho_w`` (n_tau, n_theta) in case units); the mask and its counts."""
+    n_tau, n_theta = points.shape[:2]
+    cell, tri, w, dist = _closest_on_surface(wall, points.reshape(-1, 3))
+    pts, faces = np.asarray(wall.points, float), np.asarray(wall.regular_faces)
+    n_cfd = np.einsum("ik,ikj->ij", w, vertex_normals(pts, faces)[tri]).reshape(n_tau, n_theta, 3)
+    n_cfd /= np.maximum(np.linalg.norm(n_cfd, axis=-1, keepdims=True), 1e-300)
+    cos = np.abs(np.einsum("ijk,ijk->ij", n_cfd, model_wall_normals(model, tau, theta)))
+    rel = dist.reshape(n_tau, n_theta) / rho_w
+    mask = ostium_mask(rel, cos, max_gap=gap, min_normal_cos=normal_cos)
+
+    def interpolate(name: str) -> NDArray[np.floating] | None:
+        if name in wall.point_data:
+            v = np.asarray(wall.point_data[name], float)
+            v = np.einsum("ik,ik...->i...", w, v[tri])
+        elif name in wall.cell_data:
+            v = np.asarray(wall.cell_data[name], float)[cell]
+        else:
+            return None
+        v = v.reshape(n_tau, n_theta, *v.shape[1:])
+        v[mask] = np.nan
+        return v
+
+    wss = interpolate(wss_name)
+    if wss is None:
+        raise VCSInputError(f"the wall patch has no '{wss_name}' field; run the wallShearStress function object")
+    kept = rel[~mask]
+    out: dict[str, Any] = {
+        "WSS": wss * rho_density,
+        "WSS_kinematic": wss,
+        "WSS_vcs": to_vcs_components(wss, frame) * rho_density,
+        "wall_distance_max": np.float64(dist.max()),
+        "wall_distance_mean": np.float64(dist.mean()),
+        "ostium": mask,
+        "wall_gap": rel,
+        "wall_normal_cos": cos,
+        "n_ostium": np.int64(mask.sum()),
+        "ostium_fraction": np.float64(mask.mean()),
+        "ostium_criterion": np.str_(OSTIUM_CRITERION.format(gap=gap, cos=normal_cos)),
+        "wall_gap_max_kept": np.float64(kept.max() if kept.size else np.nan),
+    }
+    # time-averaged cases: TAWSS (Pa) and OSI (dimensionless) on the wall grid, like WSS
+    for name, scale in (("TAWSS", rho_density), ("OSI", 1.0)):
+        v = interpolate(name)
+        if v is not None:
+            out[name] = v * scale
+    if mask.any():
+        log.info(
+            "%d of %d wall grid points at an ostium (closest CFD wall point > %g rho_w away: %d; "
+            "its normal > %.0f deg from the model wall's: %d): their wall values are NaN",
+            mask.sum(),
+            mask.size,
+            gap,
+            (rel > gap).sum(),
+            np.degrees(np.arccos(np.clip(normal_cos, 0, 1))),
+            (cos < normal_cos).sum(),
+        )
+    if mask.mean() > 0.2:
+        log.warning(
+            "%.1f%% of the wall grid points are at an ostium: does the model belong to this case?", 100 * mask.mean()
+        )
+    return out
+
+
 def sample_mesh(
     internal: pv.DataSet,
     patches: dict[str, pv.PolyData],
@@ -285,6 +464,8 @@ def sample_mesh(
     method: str = "mls",
     wall_patch: str = "wall",
     wss_name: str = "wallShearStress",
+    ostium_gap: float = OSTIUM_GAP,
+    ostium_normal_cos: float = OSTIUM_NORMAL_COS,
 ) -> dict[str, Any]:
     """Sample U, p (internal mesh) and WSS (wall patch) on the model's grid; see the module doc.
 
@@ -313,6 +494,9 @@ def sample_mesh(
         Name of the wall patch in ``patches``.
     wss_name : str
         Name of the wall-shear-stress array on the wall patch.
+    ostium_gap, ostium_normal_cos : float
+        Thresholds of :func:`ostium_mask` (defaults :data:`OSTIUM_GAP`, :data:`OSTIUM_NORMAL_COS`;
+        ``inf`` and 0 mark nothing).
 
     Returns
     -------
@@ -330,6 +514,7 @@ def sample_mesh(
     if method not in ("mls", "probe"):
         raise VCSInputError(f"method must be 'mls' or 'probe', not {method!r}")
     t0 = _time.perf_counter()
+    ostium = {"gap": ostium_gap, "normal_cos": ostium_normal_cos}
     tau, theta, rho_n = grid_axes(n_tau, n_theta, n_rho)
     pts_mm, rho_w = grid_points(model, tau, theta, rho_n)
     shape = pts_mm.shape[:3]
@@ -393,37 +578,24 @@ def sample_mesh(
     wall = patches.get(wall_patch)
     if wall is not None:
         Pw = (
-            P.reshape(*shape, 3)[:, :, -1].reshape(-1, 3)
+            P.reshape(*shape, 3)[:, :, -1]
             if rho_n[-1] == 1.0
-            else (model.surface_points(*np.meshgrid(tau, theta, indexing="ij")).reshape(-1, 3) * rho_scale)
+            else model.surface_points(*np.meshgrid(tau, theta, indexing="ij")) * rho_scale
         )
-        cell, tri, w, dist = _closest_on_surface(wall, Pw)
-        if wss_name in wall.point_data:
-            vals = np.asarray(wall.point_data[wss_name], float)
-            wss = np.einsum("ik,ikj->ij", w, vals[tri])
-        elif wss_name in wall.cell_data:
-            wss = np.asarray(wall.cell_data[wss_name], float)[cell]
-        else:
-            raise VCSInputError(f"the wall patch has no '{wss_name}' field; run the wallShearStress function object")
-        wss = wss.reshape(n_tau, n_theta, 3)
         out.update(
-            {
-                "WSS": wss * rho_density,
-                "WSS_kinematic": wss,
-                "WSS_vcs": to_vcs_components(wss, frame) * rho_density,
-                "wall_distance_max": np.float64(dist.max()),
-                "wall_distance_mean": np.float64(dist.mean()),
-            }
+            _sample_wall(
+                wall,
+                model,
+                tau,
+                theta,
+                Pw,
+                rho_w * rho_scale,
+                frame,
+                rho_density=rho_density,
+                wss_name=wss_name,
+                **ostium,
+            )
         )
-        # time-averaged cases: TAWSS (Pa) and OSI (dimensionless) on the wall grid, like WSS
-        for name, scale in (("TAWSS", rho_density), ("OSI", 1.0)):
-            if name in wall.point_data:
-                v = np.einsum("ik,ik->i", w, np.asarray(wall.point_data[name], float)[tri])
-            elif name in wall.cell_data:
-                v = np.asarray(wall.cell_data[name], float)[cell]
-            else:
-                continue
-            out[name] = v.reshape(n_tau, n_theta) * scale
     source = internal.field_data["field_source"] if "field_source" in internal.field_data else None
     out["field_source"] = np.str_(source[0] if source is not None and len(source) else "instantaneous")
     out["method"] = np.str_(method)
@@ -490,8 +662,13 @@ def sample_case(
         TAWSS (n_tau, n_theta) Pa (time average of |WSS|; WSS is the time-averaged vector) and
         OSI (n_tau, n_theta, dimensionless, 0..0.5); field_source ("time_average" or
         "instantaneous"),
+        ostium (n_tau, n_theta) bool (wall grid points at a side branch's ostium, whose wall
+        values are NaN; :func:`ostium_mask`), wall_gap (n_tau, n_theta, the distance to the
+        closest CFD wall point in rho_w), wall_normal_cos (n_tau, n_theta), ostium_criterion (str),
         counts: n_points, n_outside_mesh, n_wall_noslip, n_wall_outside_mesh, n_interior_nearest,
-        interior_nearest_max_distance (case units), wall_distance_max/mean, time, timings.
+        interior_nearest_max_distance (case units), wall_distance_max/mean (case units, over all
+        wall points), n_ostium, ostium_fraction, wall_gap_max_kept (the largest wall_gap outside
+        the ostia: the fit residual where the case is the patient's own surface), time, timings.
     """
     t0 = _time.perf_counter()
     internal, patches, t = read_case(case_dir, time=time, fields=fields)
@@ -632,6 +809,10 @@ COUNT_KEYS = (
     "interior_nearest_max_distance",
     "wall_distance_max",
     "wall_distance_mean",
+    "n_ostium",
+    "ostium_fraction",
+    "wall_gap_max_kept",
+    "ostium_criterion",
     "n_cells",
     "time",
     "read_time_s",
@@ -654,9 +835,12 @@ def summary(fields: dict[str, Any]) -> dict[str, Any]:
     -------
     dict
         The entries of :data:`COUNT_KEYS` present in ``fields``, as Python scalars (distances in
-        case units, times in s).
+        case units, times in s; a non-finite number as None), among them the wall grid points at
+        an ostium (``n_ostium``, ``ostium_fraction``) and the ``ostium_criterion`` that marked
+        them (:func:`ostium_mask`).
     """
-    return {k: fields[k].item() for k in COUNT_KEYS if k in fields}
+    out = {k: fields[k].item() for k in COUNT_KEYS if k in fields}
+    return {k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in out.items()}
 
 
 def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path | str | None = None) -> None:
@@ -670,7 +854,8 @@ def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path
         The ``.npz`` file (compressed); the ``.json`` summary goes next to it.
     vtu_path : Path, str or None
         A VTU of the grid (case units) with U, U_vcs, p, p_kinematic, rho_n and WSS (and TAWSS,
-        OSI of a time-averaged case; on the rho_n = 1 layer, zero inside), for ParaView.
+        OSI of a time-averaged case, RRT, ECAP of a pulsatile one, and the ostium mask as 0/1; on
+        the rho_n = 1 layer, zero inside; NaN at an ostium), for ParaView.
     """
     npz_path = Path(npz_path)
     np.savez_compressed(npz_path, **fields)
@@ -683,7 +868,7 @@ def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path
             w = np.zeros(fields["U"].shape)
             w[:, :, n_rho - 1] = fields["WSS"]
             data["WSS"] = w
-        for name in ("TAWSS", "OSI", "RRT", "ECAP"):
+        for name in ("TAWSS", "OSI", "RRT", "ECAP", "ostium"):
             if name in fields:
                 s = np.zeros(fields["p"].shape)
                 s[:, :, n_rho - 1] = fields[name]
