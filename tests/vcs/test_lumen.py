@@ -1,0 +1,166 @@
+"""`cfd.geometry: surface`: the patient's own surface closed into a lumen with every end a patch
+(vcs.lumen, `vcs lumen`), and the branch ends in the mesh sizing (vcs.cfd.sizing)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import sweep, vcs_in_process
+
+from vcs.cfd.sizing import choose_cell_size
+from vcs.errors import VCSInputError
+from vcs.io import Surface, read_surface
+from vcs.lumen import build_lumen, read_lumen_surface, write_lumen
+from vcs.mesh import edge_topology, read_stl_solids
+
+
+def _straight_tube(r: float = 5.0, length: float = 60.0, n_phi: int = 48) -> Surface:
+    """Open straight tube along z (mm): rings of regular n_phi-gons, open ends at z = 0 and length."""
+    e = np.eye(3)
+    v, f = sweep(
+        lambda s: np.outer(s, [0.0, 0.0, length]),
+        lambda s: np.tile(e[0], (len(s), 1)),
+        lambda s: np.tile(e[1], (len(s), 1)),
+        r,
+        31,
+        n_phi,
+    )
+    return Surface(v, f, {}, "mm", "given", "tube")
+
+
+def _watertight(solids: dict[str, np.ndarray]) -> bool:
+    """Every edge of the union of the solids used by exactly two triangles (vertices merged)."""
+    tri = np.concatenate(list(solids.values())).reshape(-1, 3)
+    _, inv = np.unique(np.round(tri, 9), axis=0, return_inverse=True)
+    _, counts = edge_topology(inv.reshape(-1, 3))
+    return bool((counts == 2).all())
+
+
+def test_straight_tube_lumen_is_the_polygonal_prism():
+    r, length, n = 5.0, 60.0, 48
+    lumen = build_lumen(_straight_tube(r, length, n), np.zeros(3), np.array([0.0, 0.0, length]))
+    polygon = 0.5 * n * r**2 * np.sin(2 * np.pi / n)  # area of the regular n-gon: the fan caps
+    assert lumen.volume_mm3 == pytest.approx(polygon * length, rel=1e-9)
+    assert [e.name for e in lumen.ends] == ["inlet", "outlet"]
+    assert [e.role for e in lumen.ends] == ["inlet", "outlet"]
+    for e, z, nz in zip(lumen.ends, (0.0, length), (1.0, -1.0)):
+        assert e.area == pytest.approx(polygon, rel=1e-9)
+        np.testing.assert_allclose(e.center, [0, 0, z], atol=1e-9)
+        np.testing.assert_allclose(e.normal, [0, 0, nz], atol=1e-9)  # into the lumen
+    assert list(lumen.solids) == ["wall", "inlet", "outlet"]
+    assert _watertight(lumen.solids)
+
+
+def test_the_ends_follow_the_fit_not_the_size():
+    # the smaller end as the section's inlet: the names follow the fit's end centres
+    lumen = build_lumen(_straight_tube(), np.array([0.0, 0.0, 60.0]), np.zeros(3))
+    np.testing.assert_allclose(lumen.ends[0].center, [0, 0, 60.0], atol=1e-9)
+    assert lumen.ends[0].name == "inlet"
+
+
+def test_an_end_plane_inside_the_vessel_is_refused_in_one_line():
+    with pytest.raises(VCSInputError, match=r"section's outlet .* not an opening or a flat cap") as exc:
+        build_lumen(_straight_tube(), np.zeros(3), np.array([0.0, 0.0, 30.0]))
+    assert "\n" not in str(exc.value) and "cfd_geometry model" in str(exc.value)
+
+
+@pytest.mark.realdata
+def test_vmr0154_six_caps_inlet_outlet_and_four_branches(shared_data, tmp_path):
+    mesh = shared_data / "sphinxsys_vmr0154_aorta_capped.stl"
+    c_in, c_out = np.array([-9.91, 45.55, 28.63]), np.array([-16.13, -8.21, 3.96])  # `vcs ends`: end:0, end:1 (mm)
+    lumen = build_lumen(read_lumen_surface(mesh, "cm", c_in, c_out), c_in, c_out)
+    names = [e.name for e in lumen.ends]
+    assert names == ["inlet", "outlet", "branch_1", "branch_2", "branch_3", "branch_4"]
+    assert {e.source for e in lumen.ends} == {"flat cap"}
+    areas = [e.area for e in lumen.ends[2:]]
+    assert areas == sorted(areas, reverse=True)
+    # radii as `vcs ends` lists them (cm): 1.379, 0.922, then the stubs 0.404 ... 0.266
+    np.testing.assert_allclose(
+        [np.sqrt(e.area / np.pi) for e in lumen.ends], [13.79, 9.22, 4.04, 3.55, 2.93, 2.66], atol=0.02
+    )
+    # the caps keep their own triangles: the whole input is used, nothing added
+    assert sum(len(t) for t in lumen.solids.values()) == len(read_surface(mesh, "cm").faces)
+    assert _watertight(lumen.solids)
+    info = write_lumen(lumen, tmp_path / "l.stl", tmp_path / "l.json")
+    solids = read_stl_solids(tmp_path / "l.stl")
+    assert list(solids) == ["wall", *names]
+    np.testing.assert_allclose(
+        np.concatenate(list(solids.values())) * 1e3, np.concatenate(list(lumen.solids.values())), atol=1e-6
+    )
+    assert json.loads((tmp_path / "l.json").read_text()) == json.loads(json.dumps(info))
+    assert info["ends"][0]["center"] == pytest.approx(c_in * 1e-3, abs=2e-4)
+
+
+@pytest.mark.realdata
+def test_bifurcation_volume_matches_vtk(shared_data):
+    import pyvista as pv
+
+    mesh = shared_data / "vmtk_aorta_bifurcation_open.stl"
+    c_in, c_out = np.array([221.03, 177.80, 21.30]), np.array([235.24, 101.57, 29.16])
+    lumen = build_lumen(read_lumen_surface(mesh, "mm", c_in, c_out), c_in, c_out)
+    assert [(e.name, e.source) for e in lumen.ends] == [
+        ("inlet", "open loop"),
+        ("outlet", "open loop"),
+        ("branch_1", "open loop"),
+    ]
+    np.testing.assert_allclose(lumen.ends[2].center, [210.19, 102.87, 30.82], atol=0.01)
+    # an independent volume: VTK's hole filling, normals made consistent, and mass properties
+    filled = pv.read(str(mesh)).clean().fill_holes(1e3)
+    filled = filled.compute_normals(auto_orient_normals=True, consistent_normals=True, split_vertices=False)
+    assert filled.n_open_edges == 0
+    assert lumen.volume_mm3 == pytest.approx(filled.volume, rel=1e-4)
+    assert _watertight(lumen.solids)
+
+
+@pytest.mark.realdata
+def test_rounded_ends_are_refused_with_what_to_do(shared_data, tmp_path):
+    mesh = shared_data / "sphinxsys_tah_aorta_capped_coarse.stl"
+    c_in, c_out = np.array([-27.31, -203.48, -1173.99]), np.array([4.00, -120.90, -1246.75])
+    with pytest.raises(VCSInputError, match=r"2 rounded \(closed\) end\(s\).*cut the ends flat"):
+        build_lumen(read_lumen_surface(mesh, "mm", c_in, c_out), c_in, c_out)
+
+
+@pytest.mark.realdata
+def test_vcs_lumen_command(shared_data, tmp_path):
+    mesh = shared_data / "vmtk_aorta_bifurcation_open.stl"
+    fit = vcs_in_process("fit", mesh, "-o", tmp_path / "fit", "--inlet", "end:0", "--outlet", "end:1")
+    assert fit.returncode == 0, fit.stderr
+    model = tmp_path / "fit" / "model.json"
+    r = vcs_in_process("lumen", mesh, "--model", model, "-o", tmp_path / "lumen.stl", "--ends", tmp_path / "ends.json")
+    assert r.returncode == 0, r.stderr
+    ends = json.loads((tmp_path / "ends.json").read_text())["ends"]
+    assert [e["name"] for e in ends] == ["inlet", "outlet", "branch_1"]
+    assert ends[0]["equivalent_radius"] == pytest.approx(7.69e-3, abs=1e-5)  # metres
+    bad = vcs_in_process("lumen", mesh, "--model", model, "-o", tmp_path / "lumen.vtp")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+
+
+SIZES = {"inlet_diameter_m": 0.02, "outlet_diameter_m": 0.016, "narrowest_diameter_m": 0.015, "narrowest_tau": 0.5}
+MESH = {
+    "cell_size": "auto",
+    "cells_across_end": 12,
+    "cells_across_narrowest": 8,
+    "cells_across_branch": 6,
+    "max_cells": 10**7,
+}
+
+
+def test_auto_cell_size_resolves_the_smallest_branch():
+    got = choose_cell_size(MESH, {**SIZES, "branch_diameters_m": {"branch_1": 0.008, "branch_2": 0.006}}, 1e-5)
+    assert got["governed_by"] == "smallest branch" and got["cell_size_m"] == pytest.approx(0.001)
+    assert got["cells_across_branch"]["branch_2"] == pytest.approx(6.0)
+    assert "branch_2" in got["why"]
+    # large branches do not change the end-governed size (0.016 / 12)
+    big = choose_cell_size(MESH, {**SIZES, "branch_diameters_m": {"branch_1": 0.015}}, 1e-5)
+    assert big["governed_by"] == "smallest end" and big["cell_size_m"] == pytest.approx(0.00133)
+
+
+def test_a_given_cell_size_too_coarse_for_a_branch_is_refused_in_one_line():
+    sizes = {**SIZES, "branch_diameters_m": {"branch_1": 0.008, "branch_3": 0.004}}
+    with pytest.raises(VCSInputError, match=r"branch_3 \(d = 4 mm\) is only 2\.0 cells across.*at most 1\.33 mm") as e:
+        choose_cell_size({**MESH, "cell_size": 0.002}, sizes, 1e-5)
+    assert "\n" not in str(e.value)
+    ok = choose_cell_size({**MESH, "cell_size": 0.0013}, sizes, 1e-5)  # 3.1 cells across: allowed
+    assert ok["cells_across_branch"]["branch_3"] == pytest.approx(0.004 / 0.0013)
