@@ -19,7 +19,7 @@ DEMO_MESH = re.compile(r"results/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<s
 SHEET_COLUMNS = (
     "id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap",
     "cell_size_mm", "flow_rate_l_min", "inlet_velocity_m_s", "valve_area_cm2", "inflow_waveform",
-    "cfd_geometry",
+    "cfd_geometry", "outlets", "rcr_resistance_mmhg_s_ml", "rcr_compliance_ml_mmhg",
 )
 # optional per-patient CFD columns: number in the sheet's unit -> (key of vcs.cfd.render_case's
 # `patient`, factor to SI); cell_size_mm may also be `auto`
@@ -28,6 +28,12 @@ PATIENT_CFD_COLUMNS = {
     "flow_rate_l_min": ("flow_rate", 1e-3 / 60.0),
     "inlet_velocity_m_s": ("velocity", 1.0),
     "valve_area_cm2": ("valve_area", 1e-4),
+}
+# optional per-patient Windkessel totals (outlets rcr): number in the sheet's clinical unit -> (key of
+# cfd.outlets.rcr, factor to SI: 1 mmHg s/mL = 1.33322e8 Pa s/m3, 1 mL/mmHg = 7.50062e-9 m3/Pa)
+PATIENT_RCR_COLUMNS = {
+    "rcr_resistance_mmhg_s_ml": ("resistance", 133.322387415 / 1e-6),
+    "rcr_compliance_ml_mmhg": ("compliance", 1e-6 / 133.322387415),
 }
 
 # The `vcs` console script lives beside this Python (the project's venv): put it on PATH so that
@@ -177,7 +183,7 @@ def _number_range(column):
 
 
 _PATIENT_SCHEMA = None
-_UNITS = {"mm": "mm", "min": "L/min", "s": "m/s", "cm2": "cm2"}
+_UNITS = {"mm": "mm", "min": "L/min", "s": "m/s", "cm2": "cm2", "ml": "mmHg s/mL", "mmhg": "mL/mmHg"}
 
 
 def _sheet_number(text, column, where):
@@ -214,7 +220,7 @@ def load_patients(sheet):
             fail(f"patients sheet '{sheet}' line {n}: id '{pid}' already used on line {first_line[pid]}; ids must be unique")
         first_line[pid] = n
         record = {k: v for k, v in row.items() if v != ""}
-        for column in PATIENT_CFD_COLUMNS:
+        for column in (*PATIENT_CFD_COLUMNS, *PATIENT_RCR_COLUMNS):
             if column in record:
                 record[column] = _sheet_number(record[column], column, f"patients sheet '{sheet}' line {n} (id {pid})")
         try:
@@ -354,6 +360,12 @@ def patient_cfd(wildcards):
             continue  # the config's own value: no change (and no rerun)
         if value is not None:
             out[key] = value if value == "auto" else value * factor
+    outlets = {"type": row["outlets"]} if row.get("outlets") else {}
+    rcr = {key: row[c] * f for c, (key, f) in PATIENT_RCR_COLUMNS.items() if row.get(c) is not None}
+    if rcr:
+        outlets["rcr"] = rcr
+    if outlets:
+        out["outlets"] = outlets
     return out
 
 
