@@ -21,7 +21,7 @@ import pytest
 import pyvista as pv
 
 from vcs.cfd.markers import ecap, rrt
-from vcs.cfd.resample import OSTIUM_GAP, load_fields, sample_mesh, summary, write_fields
+from vcs.cfd.resample import OSTIUM_GAP, OSTIUM_NORMAL_COS, load_fields, ostium_mask, sample_mesh, summary, write_fields
 from vcs.grid import grid_to_vtk
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -176,3 +176,17 @@ def test_lumen_without_branch_has_no_ostium(interior, bumps):
     assert f["n_ostium"] == 0 and not f["ostium"].any()
     assert np.isfinite(f["WSS"]).all() and np.isfinite(f["TAWSS"]).all()
     assert f["wall_gap"].max() == pytest.approx(bumps, abs=0.01)
+
+
+def test_ostium_mask_thresholds_and_end_rows():
+    """Gap above OSTIUM_GAP or the CFD normal turned beyond 60 degrees: an ostium; a turned normal
+    on the end rows (the wall patch's rim at the inlet or outlet) is not."""
+    gap = np.zeros((5, 4))
+    cos = np.ones((5, 4))
+    gap[2, 1] = OSTIUM_GAP * 1.01
+    cos[3, 2] = OSTIUM_NORMAL_COS * 0.99
+    cos[0, 0] = cos[-1, 3] = 0.0
+    expected = np.zeros((5, 4), bool)
+    expected[2, 1] = expected[3, 2] = True
+    np.testing.assert_array_equal(ostium_mask(gap, cos), expected)
+    np.testing.assert_array_equal(ostium_mask(gap, cos, max_gap=np.inf, min_normal_cos=0.0), False)

@@ -34,7 +34,7 @@ WSS) are NaN, never a number taken from the branch. A wall point is at an ostium
 * the CFD wall's normal there makes more than 60 degrees with the model wall's normal
   (:data:`OSTIUM_NORMAL_COS` = cos 60 deg; at least 0.82 on the branch-free real aortas, about 0
   on a branch's wall: this catches the points near the rim whose closest point is up the
-  branch).
+  branch); not on the end rows tau = 0, 1, where the wall patch meets the inlet or outlet.
 
 U (no-slip: 0), p and the interior (rho_n < 1) samples are not masked. A lumen without branches
 gets no mask. The mask, the distance (``wall_gap``, in rho_w) and the normals' cosine
@@ -299,21 +299,22 @@ def mls_interpolate(
 #: A wall grid point is at an ostium when its closest CFD wall point is farther than this many
 #: rho_w(tau, theta). Branch-free real aortas fitted with the defaults (vmtk closed segment,
 #: SimVascular segment; grids 64 x 32 and 128 x 64): at most 0.12 (99.5 % below 0.08); a
-#: snapped model-wall case: a fraction of a cell (< 0.06 at 8 cells per radius). Inside an ostium
+#: snapped OpenFOAM model tube: < 0.03 (4 and 8 cells per radius). Inside an ostium
 #: the distance grows to the branch radius (0.3-0.7 rho_w on AortaCFD patient1, VMR 0154, the
 #: vmtk bifurcation), so only a band of 0.15 rho_w (under one cell of the default 64 x 32 grid on
 #: an aorta, 2 pi / 32 = 0.2 rho_w) along the rim is left to the normal criterion.
 OSTIUM_GAP = 0.15
 #: ... or when |n_cfd . n_model| < this (the CFD wall at the closest point turned by more than
-#: 60 degrees from the model wall): on the branch-free real aortas the cosine is at least 0.82,
+#: 60 degrees from the model wall): on the branch-free real aortas the cosine is at least 0.82
+#: (a snapped OpenFOAM model tube: 0.99 away from its ends),
 #: on a branch's wall about 0; it marks the points near the rim whose closest point lies up the
 #: branch wall (where a curved main wall meets the branch, at the ostium's sides).
 OSTIUM_NORMAL_COS = 0.5
 #: The criterion in words (fields.npz ``ostium_criterion``, the summary, the atlas).
 OSTIUM_CRITERION = (
     "a wall grid point (rho_n = 1) is at an ostium when its closest CFD wall point is farther than "
-    "{gap:g} rho_w(tau, theta), or the CFD wall's normal there and the model wall's normal have "
-    "|cos| < {cos:g}; its wall values (WSS, TAWSS, OSI, RRT, ECAP, phase WSS) are NaN"
+    "{gap:g} rho_w(tau, theta), or (0 < tau < 1) the CFD wall's normal there and the model wall's "
+    "normal have |cos| < {cos:g}; its wall values (WSS, TAWSS, OSI, RRT, ECAP, phase WSS) are NaN"
 )
 
 
@@ -352,11 +353,16 @@ def ostium_mask(
 ) -> NDArray[np.bool_]:
     """Wall grid points at an ostium (:data:`OSTIUM_CRITERION`).
 
+    The normal criterion is not applied on the end rows (tau = 0 and 1): there the wall patch
+    ends at the inlet or outlet patch, whose snapped rim faces can be turned by more than 60
+    degrees (|cos| 0.48 at one point of the outlet rim of a snapped model tube, 8 cells per
+    radius, gap 0.002 rho_w); a branch cannot leave through an end plane.
+
     Parameters
     ----------
-    gap : (...) float
+    gap : (n_tau, n_theta) float
         Distance from each model wall point to its closest CFD wall point, in rho_w(tau, theta).
-    normal_cos : (...) float
+    normal_cos : (n_tau, n_theta) float
         |n_cfd . n_model|: the CFD wall's unit normal there (interpolated vertex normals) against
         the model wall's (:func:`model_wall_normals`).
     max_gap : float
@@ -366,10 +372,12 @@ def ostium_mask(
 
     Returns
     -------
-    (...) bool
+    (n_tau, n_theta) bool
         True at an ostium.
     """
-    return (np.asarray(gap) > max_gap) | (np.asarray(normal_cos) < min_normal_cos)
+    turned = np.asarray(normal_cos) < min_normal_cos
+    turned[[0, -1]] = False
+    return (np.asarray(gap) > max_gap) | turned
 
 
 def _sample_wall(
@@ -442,7 +450,7 @@ def _sample_wall(
             gap,
             (rel > gap).sum(),
             np.degrees(np.arccos(np.clip(normal_cos, 0, 1))),
-            (cos < normal_cos).sum(),
+            (cos[1:-1] < normal_cos).sum(),
         )
     if mask.mean() > 0.2:
         log.warning(
