@@ -7,8 +7,10 @@ The pieces, each a plain function or a small frozen value object:
   grid (:func:`wall_grid_points`); :func:`transform_model`, :func:`align_models`.
 * :mod:`vcs.atlas.pca`: :class:`PCA` (Section 2.3.3) of feature vectors (:func:`shape_matrix`) or
   of resampled flow fields (:func:`flow_vector`; of a pulsatile cohort also the
-  :data:`WALL_MARKERS` and the phase fields, :func:`pulsatile_fields`); :func:`mode_deformation`
-  (paper Fig. 7); :func:`top_variation_mask`.
+  :data:`WALL_MARKERS` and the phase fields, :func:`pulsatile_fields`); a wall field's cells
+  missing for any patient (NaN at a side branch's ostium, a diverging RRT; :func:`is_wall_field`)
+  are left out of its PCA and recorded, NaN in its mean and modes (:data:`NON_FINITE_RULE`);
+  :func:`mode_deformation` (paper Fig. 7); :func:`top_variation_mask`.
 * :mod:`vcs.atlas.regression`: :func:`ridge_loo` (beyond the paper), shape scores -> flow scores
   ridge regression with leave-one-out cross-validated R^2; :func:`loo_sufficiency` (too few
   patients to say anything) and :func:`r2_skill` (``none`` for R^2 <= 0).
@@ -48,6 +50,7 @@ from vcs.atlas.pca import (
     field_key,
     field_slug,
     flow_vector,
+    is_wall_field,
     mode_deformation,
     phase_field,
     pulsatile_fields,
@@ -89,6 +92,7 @@ __all__ = [
     "field_key",
     "field_slug",
     "flow_vector",
+    "is_wall_field",
     "generalized_procrustes",
     "loo_sufficiency",
     "mode_deformation",

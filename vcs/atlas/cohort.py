@@ -1,11 +1,24 @@
 """The cohort atlas (paper Section 2.3): who is included, and coregistration + shape PCA + flow PCA +
 shape -> flow regression of the included patients, as arrays (no files; see :mod:`vcs.atlas.build`).
 
+Missing wall values. A wall field (WSS, the wall markers TAWSS, OSI, log10_RRT, ECAP, and every
+phase's WSS: :func:`vcs.atlas.pca.is_wall_field`) may hold NaN or inf at a wall cell: NaN where
+the resampling found a side branch's ostium (no wall of the section there:
+:data:`vcs.cfd.resample.OSTIUM_CRITERION`), inf/NaN where a marker diverges (RRT where OSI = 0.5).
+A cell missing for ANY included patient is left out of that field's PCA (:data:`NON_FINITE_RULE`),
+never filled with a number: the PCA is that of the other cells, its mean and modes are NaN there
+(``atlas.npz``, ``flow_mean.vtu``, grey in the figures), and the atlas records per field how many
+cells were left out, which fraction, and which patients caused them (:attr:`Atlas.wall_fields`,
+atlas.json ``wall_fields``). A field with no cell left has no PCA and says so in one log line and
+in its record. U and p (whose wall layer is the no-slip U = 0 and the interpolated p) must be
+finite everywhere.
+
 Pure numpy/scipy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -19,7 +32,10 @@ from vcs.atlas.pca import (
     PCA,
     WALL_MARKERS,
     field_key,
+    field_quantity,
     flow_vector,
+    is_vector_field,
+    is_wall_field,
     pulsatile_fields,
     shape_matrix,
 )
@@ -38,14 +54,17 @@ if TYPE_CHECKING:
     from vcs.vessel import VesselModel
 
 
+log = logging.getLogger("vcs.atlas")
+
 #: Stages of a patient's chain, in order (the ``stage`` of an exclusion in atlas.json).
 STAGES = ("fit", "wall", "case", "mesh", "solve", "sampling")
-#: How a wall marker's PCA treats non-finite values (atlas.json ``wall_markers``).
+#: How a wall field's PCA treats missing values (atlas.json ``wall_fields`` and ``wall_markers``).
 NON_FINITE_RULE = (
-    "a wall cell where any included patient's marker is not finite (log10_RRT: where RRT is not finite "
-    "and positive, i.e. OSI = 0.5 or TAWSS = 0) is left out of that marker's PCA: NaN in its mean and "
-    "+-2 sigma maps, 0 in its modes, never replaced by a number; a marker with no cell left has no PCA "
-    "(its record's 'excluded' says why)"
+    "a wall cell where any included patient's wall field (WSS, TAWSS, OSI, log10_RRT, ECAP, a phase's "
+    "WSS) is not finite (NaN at a side branch's ostium, where the resampling found no wall of the "
+    "section; log10_RRT: where RRT is not finite and positive, i.e. OSI = 0.5 or TAWSS = 0) is left out "
+    "of that field's PCA, all of its vector components: NaN in its mean, modes and +-2 sigma maps, "
+    "never replaced by a number; a field with no cell left has no PCA (its record's 'excluded' says why)"
 )
 _MESH_UTILITIES = ("blockMesh", "snappyHexMesh", "checkMesh")
 
@@ -239,11 +258,15 @@ class Atlas:
     phase_names : tuple of str
         The phases of a pulsatile cohort's phase fields (empty for a steady one).
     wall_markers : dict
-        {wall marker asked for: ``data`` (its fields.npz array), ``transform`` (None or
-        ``log10``), ``units``, ``n_cells``, ``n_left_out`` (cells left out of its PCA,
-        :data:`NON_FINITE_RULE`), ``non_finite_by_patient`` ({patient: cells whose value is not
-        finite (log10_RRT: whose RRT is not finite and positive)}, only patients that have some)
-        and, for a marker without a PCA, ``excluded`` (the reason)}.
+        {wall marker asked for: its record of ``wall_fields``}.
+    wall_fields : dict
+        {wall field asked for (:func:`vcs.atlas.pca.is_wall_field`): ``data`` (its fields.npz
+        array), ``transform`` (None or ``log10``), ``units``, ``n_cells`` (wall grid cells),
+        ``n_left_out`` (cells left out of its PCA, :data:`NON_FINITE_RULE`), ``fraction_left_out``,
+        ``non_finite_by_patient`` ({patient: cells whose value is not finite (log10_RRT: whose
+        RRT is not finite and positive)}, only patients that have some), ``ostium_by_patient``
+        ({patient: wall cells its resampling marked at an ostium}, only patients that have some)
+        and, for a field without a PCA, ``excluded`` (the reason)}.
     """
 
     patients: list[str]
@@ -264,6 +287,7 @@ class Atlas:
     flow_kind: str = "steady"  # steady | pulsatile
     phase_names: tuple[str, ...] = ()  # phases of a pulsatile cohort's phase fields
     wall_markers: dict[str, dict[str, Any]] = field(default_factory=dict)  # marker -> non-finite record
+    wall_fields: dict[str, dict[str, Any]] = field(default_factory=dict)  # wall field -> non-finite record
 
 
 def compute_atlas(
@@ -314,9 +338,9 @@ def compute_atlas(
         (:func:`cohort_flow_kind`): U, p, WSS of a steady cohort; of a pulsatile one also the wall
         markers TAWSS, OSI, log10_RRT, ECAP (scalar (n_tau, n_theta) maps) and
         ``phase/<name>/U|p|WSS`` of each of its ``phase_names``
-        (:func:`vcs.atlas.pca.pulsatile_fields`). A wall marker's PCA leaves out the cells where
-        any patient's value is not finite (:data:`NON_FINITE_RULE`); every other field must be
-        finite.
+        (:func:`vcs.atlas.pca.pulsatile_fields`). A wall field's PCA (WSS, the markers, a phase's
+        WSS) leaves out the cells where any patient's value is not finite, e.g. NaN at an ostium
+        (:data:`NON_FINITE_RULE`); U and p must be finite.
     shape_block : {"all", "wall", "centerline"}
         Which part of the feature vector the shape PCA varies (:func:`vcs.atlas.pca.shape_matrix`).
     accept_relaxed : bool
@@ -331,24 +355,10 @@ def compute_atlas(
     VCSInputError
         Fewer than 3 included patients; pulsatile and steady patients together
         (:func:`cohort_flow_kind`); pulsatile patients sampled at different phases; fields
-        missing, resampled on different grids or (other than a wall marker) not finite.
+        missing, resampled on different grids or (U, p) not finite.
     """
     reports = reports or {}
-    excluded, stages = {}, {}
-    for pid in dict.fromkeys([*models, *reports]):
-        reason = fit_exclusion(models[pid]) if pid in models else None
-        found = ("fit", reason) if reason is not None else None
-        if found is None:
-            found = patient_exclusion(
-                reports.get(pid),
-                statuses[pid] if pid in statuses else {},  # not given: nothing to say
-                fields.get(pid),
-                accept_relaxed=accept_relaxed,
-            )
-        if found is None and pid not in models:
-            found = ("fit", "no model")
-        if found is not None:
-            stages[pid], excluded[pid] = found
+    excluded, stages = _exclusions(models, fields, statuses, reports, accept_relaxed)
     patients = [pid for pid in models if pid not in excluded]
     if len(patients) < 3:
         listed = "; ".join(f"{p} ({stages[p]}: {r})" for p, r in excluded.items()) or "none"
@@ -376,37 +386,9 @@ def compute_atlas(
     }
     gpa_mean = report.pop("mean_points_mm")
     shape = PCA.from_data(shape_matrix(aligned, shape_block), n_modes)
-    flow: dict[str, PCA] = {}
-    markers: dict[str, dict[str, Any]] = {}
-    for f in flow_fields:
-        X = np.array([flow_vector(fields[p], f, frame=flow_frame) for p in patients])
-        if f not in WALL_MARKERS:
-            flow[f] = PCA.from_data(X, n_modes)
-            continue
-        bad = ~np.isfinite(X)
-        left_out = int(bad.any(axis=0).sum())
-        markers[f] = {
-            "data": field_key(f, flow_frame),
-            "transform": "log10" if f in MARKER_TRANSFORMS else None,
-            "units": FIELD_UNITS[f],
-            "n_cells": int(X.shape[1]),
-            "n_left_out": left_out,
-            "non_finite_by_patient": {p: int(n) for p, n in zip(patients, bad.sum(axis=1)) if n},
-        }
-        if left_out == X.shape[1]:
-            markers[f]["excluded"] = f"no wall cell where every included patient's {markers[f]['data']} is finite" + (
-                " and positive" if f in MARKER_TRANSFORMS else ""
-            )
-            continue
-        flow[f] = PCA.from_data(X, n_modes, drop_non_finite=True)
+    flow, walls = _flow_pcas(fields, patients, flow_fields, flow_frame, n_modes)
     k = min(n_regression_scores or n_modes, shape.n_modes)
-    sufficiency, why = loo_sufficiency(len(patients), k)
-    regression = {}
-    for f in flow:
-        r = ridge_loo(shape.scores[:, :k], flow[f].scores)
-        r["status"], r["status_reason"] = sufficiency, why
-        r["skill"] = [sufficiency if sufficiency != "ok" else r2_skill(float(v)) for v in np.atleast_1d(r["r2"])]
-        regression[f] = r
+    regression = _regressions(shape, flow, k, len(patients))
     f0 = fields[patients[0]]
     grid = {key: np.asarray(f0[key]) for key in ("tau", "theta", "rho_n") if key in f0}
     return Atlas(
@@ -441,8 +423,112 @@ def compute_atlas(
         },
         kind,
         phases,
-        markers,
+        {f: r for f, r in walls.items() if f in WALL_MARKERS},
+        walls,
     )
+
+
+def _exclusions(
+    models: Mapping[str, VesselModel],
+    fields: Mapping[str, Mapping[str, Any]],
+    statuses: Mapping[str, Mapping[str, Any] | None],
+    reports: Mapping[str, Mapping[str, Any] | None],
+    accept_relaxed: bool,
+) -> tuple[dict[str, str], dict[str, str]]:
+    """({patient: reason}, {patient: stage}) of the patients of ``models`` and ``reports`` left out
+    (:func:`fit_exclusion`, then :func:`patient_exclusion`; no model: ``fit``)."""
+    excluded, stages = {}, {}
+    for pid in dict.fromkeys([*models, *reports]):
+        reason = fit_exclusion(models[pid]) if pid in models else None
+        found = ("fit", reason) if reason is not None else None
+        if found is None:
+            found = patient_exclusion(
+                reports.get(pid),
+                statuses[pid] if pid in statuses else {},  # not given: nothing to say
+                fields.get(pid),
+                accept_relaxed=accept_relaxed,
+            )
+        if found is None and pid not in models:
+            found = ("fit", "no model")
+        if found is not None:
+            stages[pid], excluded[pid] = found
+    return excluded, stages
+
+
+def _flow_pcas(
+    fields: Mapping[str, Mapping[str, Any]],
+    patients: Sequence[str],
+    flow_fields: Sequence[str],
+    frame: str,
+    n_modes: int,
+) -> tuple[dict[str, PCA], dict[str, dict[str, Any]]]:
+    """({field: PCA}, {wall field: record}) of the flow fields; a wall field's PCA leaves out the
+    cells missing for any patient (:data:`NON_FINITE_RULE`), a field with none left has no PCA."""
+    flow: dict[str, PCA] = {}
+    walls: dict[str, dict[str, Any]] = {}
+    for f in flow_fields:
+        X = np.array([flow_vector(fields[p], f, frame=frame) for p in patients])
+        if not is_wall_field(f):
+            flow[f] = PCA.from_data(X, n_modes)
+            continue
+        walls[f], X = _left_out_cells(f, X, fields, patients, frame)
+        if "excluded" in walls[f]:
+            log.warning("%s has no PCA: %s", f, walls[f]["excluded"])
+            continue
+        flow[f] = PCA.from_data(X, n_modes, drop_non_finite=True)
+    return flow, walls
+
+
+def _left_out_cells(
+    f: str, X: np.ndarray, fields: Mapping[str, Mapping[str, Any]], patients: Sequence[str], frame: str
+) -> tuple[dict[str, Any], np.ndarray]:
+    """The record of a wall field's missing cells (:attr:`Atlas.wall_fields`) and its data with
+    every component of a cell missing in one component set to NaN (a cell is in or out whole)."""
+    per_cell = 3 if is_vector_field(f) else 1
+    bad = ~np.isfinite(X.reshape(len(X), -1, per_cell)).all(axis=-1)  # (n patients, n cells)
+    out = bad.any(axis=0)
+    X = X.copy()
+    X.reshape(len(X), -1, per_cell)[:, out] = np.nan
+    ostia = {p: int(np.asarray(fields[p]["ostium"]).sum()) for p in patients if "ostium" in fields[p]}
+    rec: dict[str, Any] = {
+        "data": field_key(f, frame),
+        "transform": "log10" if f in MARKER_TRANSFORMS else None,
+        "units": FIELD_UNITS[field_quantity(f)],
+        "n_cells": int(out.size),
+        "n_left_out": int(out.sum()),
+        "fraction_left_out": float(out.mean()),
+        "non_finite_by_patient": {p: int(n) for p, n in zip(patients, bad.sum(axis=1)) if n},
+        "ostium_by_patient": {p: n for p, n in ostia.items() if n},
+    }
+    if out.all():
+        rec["excluded"] = (
+            f"no wall cell where every included patient's {rec['data']} is finite"
+            + (" and positive" if f in MARKER_TRANSFORMS else "")
+            + f" (missing for {', '.join(rec['non_finite_by_patient'])})"
+        )
+    elif out.any():
+        log.info(
+            "%s: %d of %d wall cells (%.1f%%) left out of its PCA (missing for %s)",
+            f,
+            rec["n_left_out"],
+            rec["n_cells"],
+            100 * rec["fraction_left_out"],
+            ", ".join(f"{p} {n}" for p, n in rec["non_finite_by_patient"].items()),
+        )
+    return rec, X
+
+
+def _regressions(shape: PCA, flow: Mapping[str, PCA], k: int, n_patients: int) -> dict[str, dict[str, Any]]:
+    """{field: :func:`vcs.atlas.regression.ridge_loo` of the first k shape scores -> the field's
+    scores, with ``status``, ``status_reason`` and ``skill`` per mode}."""
+    sufficiency, why = loo_sufficiency(n_patients, k)
+    regression = {}
+    for f in flow:
+        r = ridge_loo(shape.scores[:, :k], flow[f].scores)
+        r["status"], r["status_reason"] = sufficiency, why
+        r["skill"] = [sufficiency if sufficiency != "ok" else r2_skill(float(v)) for v in np.atleast_1d(r["r2"])]
+        regression[f] = r
+    return regression
 
 
 def cohort_flow_kind(sources: Mapping[str, str]) -> str:
@@ -504,7 +590,7 @@ def _check_fields(
     ------
     VCSInputError
         A patient lacks a field's array, its shape differs from the first patient's, or a field
-        other than a wall marker holds non-finite values.
+        other than a wall field (U, p) holds non-finite values.
     """
     shapes: dict[str, tuple[int, ...]] = {}
     for f in flow_fields:
@@ -522,10 +608,10 @@ def _check_fields(
                     f"patient {pid}: field {key} has shape {a.shape}, patient {patients[0]} "
                     f"{shapes[f]}; resample every case on the same (n_tau, n_theta, n_rho) grid"
                 )
-            if f not in WALL_MARKERS and not np.isfinite(a).all():
+            if not is_wall_field(f) and not np.isfinite(a).all():
                 raise VCSInputError(
                     f"patient {pid}: field {key} has {int((~np.isfinite(a)).sum())} non-finite values; "
-                    f"resample the case (only the wall markers {', '.join(WALL_MARKERS)} may be non-finite)"
+                    "resample the case (only the wall fields WSS, TAWSS, OSI, RRT, ECAP may be non-finite)"
                 )
     return shapes
 
@@ -606,7 +692,10 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         with its ``phase_names``) also TAWSS, OSI, log10_RRT, ECAP and ``phase/<name>/U|p|WSS``;
         ``wall_markers`` (null without markers) says how each marker's PCA treated non-finite
         values (``non_finite_rule``, ``transforms``, and per marker its record of
-        :attr:`Atlas.wall_markers`).
+        :attr:`Atlas.wall_markers`); ``wall_fields`` (null without wall fields) the same for every
+        wall field (WSS, the markers, the phases' WSS): ``non_finite_rule`` and per field its
+        record of :attr:`Atlas.wall_fields` (cells left out, their fraction, the patients missing
+        them, the patients' ostium cells).
     """
     first = next(iter(atlas.regression.values()), {})
     markers = None
@@ -626,6 +715,7 @@ def atlas_summary(atlas: Atlas) -> dict[str, Any]:
         "flow_kind": atlas.flow_kind,
         "phase_names": list(atlas.phase_names),
         "wall_markers": markers,
+        "wall_fields": {"non_finite_rule": NON_FINITE_RULE, "fields": atlas.wall_fields} if atlas.wall_fields else None,
         "time_average_errors": atlas.time_average_errors,
         "knots": atlas.alignment_report.get("knots"),
         "alignment": {

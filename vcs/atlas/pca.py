@@ -16,8 +16,11 @@ the array of ``fields.npz`` each one is made of):
   ``phase_names`` the fields ``phase/<name>/U``, ``phase/<name>/p``, ``phase/<name>/WSS``
   (:func:`phase_field`; vectors in the frame of the unprefixed ones).
 
-Only the wall markers may hold non-finite values (RRT diverges where OSI -> 0.5 or TAWSS -> 0);
-their PCA leaves those cells out (:meth:`PCA.from_data` with ``drop_non_finite``).
+Only the wall fields (:func:`is_wall_field`: WSS, the wall markers, a phase's WSS) may hold
+non-finite values: NaN where the resampling found a side branch's ostium (no wall of the section:
+:data:`vcs.cfd.resample.OSTIUM_CRITERION`), inf/NaN where RRT diverges (OSI -> 0.5 or TAWSS -> 0).
+Their PCA leaves those cells out (:meth:`PCA.from_data` with ``drop_non_finite``: NaN in the mean
+and the modes there, never a number standing in; :data:`vcs.atlas.cohort.NON_FINITE_RULE`).
 
 Pure numpy; never imports plotting (:mod:`vcs.atlas.plots`).
 """
@@ -75,6 +78,12 @@ def field_phase(name: str) -> str | None:
     """The phase of a phase field (``peak_systole`` of ``phase/peak_systole/U``), else None."""
     parts = name.split("/")
     return parts[1] if len(parts) == 3 and parts[0] == "phase" else None
+
+
+def is_wall_field(name: str) -> bool:
+    """Whether a flow field lives on the wall grid (n_tau, n_theta[, 3]) and may miss cells: WSS,
+    the :data:`WALL_MARKERS` and a phase's WSS (U and p are volume fields and never may)."""
+    return field_quantity(name) in ("WSS", *WALL_MARKERS)
 
 
 def is_vector_field(name: str) -> bool:
@@ -151,8 +160,8 @@ class PCA:
     mean : (d,) float
         NaN outside ``support``.
     components : (k, d) float
-        Orthonormal modes, sign fixed so the largest-magnitude entry of each is positive; 0
-        outside ``support``.
+        Orthonormal modes (over ``support``), sign fixed so the largest-magnitude entry of each is
+        positive; NaN outside ``support``.
     sigma : (k,) float
         Standard deviation of the scores along each mode (ddof = 1), units of the data.
     explained_variance_ratio : (k,) float
@@ -182,9 +191,9 @@ class PCA:
             Modes kept; at most (and by default) min(n - 1, d') with d' the entries used.
         drop_non_finite : bool
             Leave out the entries (columns) that are not finite in every sample: the PCA is that of
-            the other columns, its ``support``; outside it the mean is NaN (so are samples rebuilt
-            from it) and the modes are 0. Without it, a non-finite value is an error (never
-            replaced by a number).
+            the other columns, its ``support``; outside it the mean and the modes are NaN (so are
+            samples rebuilt from them; scores and projections use the support only). Without it, a
+            non-finite value is an error (never replaced by a number).
 
         Returns
         -------
@@ -211,7 +220,7 @@ class PCA:
             part = cls.from_data(X[:, keep], n_modes)
             mean = np.full(X.shape[1], np.nan)
             mean[keep] = part.mean
-            comps = np.zeros((part.n_modes, X.shape[1]))
+            comps = np.full((part.n_modes, X.shape[1]), np.nan)
             comps[:, keep] = part.components
             return cls(mean, comps, part.sigma, part.explained_variance_ratio, part.scores, keep)
         n = len(X)
