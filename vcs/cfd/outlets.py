@@ -472,6 +472,17 @@ def outlet_plan(
     * ``rcr``: every outlet a three-element Windkessel (Westerhof et al. 2009) from
       :func:`split_rcr` (the totals split by Murray's law):
       ``P = R_p Q + P_c,  C dP_c/dt = Q - (P_c - P_d)/R_d``; a steady run sees ``R_p + R_d``.
+      The main outlet(s) carry the Windkessel as a pressure condition. A branch next to a main
+      outlet takes its Windkessel's share of the flow instead, ``Q_k = f_k Q_in(t)`` (as murray):
+      the outlets' Windkessels are in parallel with one time constant and ``Z_k = Z_total / f_k``
+      (:func:`split_rcr`), so at a common pressure this split is exact at every instant, and the
+      pressures of a rigid incompressible lumen differ between its ends by far less than the
+      Windkessel's ``Z Q`` (R_total ~ 1e8 Pa s/m^3 against ~1e6 for an aorta). A pressure
+      condition on every outlet, each fed by its own flow (explicit coupling), amplifies any
+      change of the split by ~ R_k / (the lumen's resistance between the outlets): on a tube whose
+      end is split into a disc and an annulus, SIMPLE diverged and pimpleFoam settled to a
+      circulation of -128 % / +228 % of the inflow through the two outlets. With branches only
+      (no ``outlet*``) every outlet keeps the pressure condition (that coupling).
 
     Parameters
     ----------
@@ -526,6 +537,10 @@ def outlet_plan(
             o.update(bc_u="flowRateOutletVelocity", bc_p="zeroGradient", flow_rate_m3_s=float(fractions[i]) * flow_rate)
         elif rcr is not None:
             o.update(_rcr_entry(rcr[i], outlets, flow_rate, rho))
+            if role == "branch" and "main" in roles:  # its Windkessel's share of the flow (see above)
+                o.update(
+                    bc_u="flowRateOutletVelocity", bc_p="zeroGradient", flow_rate_m3_s=float(fractions[i]) * flow_rate
+                )
         plan.append(o)
     return plan
 
@@ -627,8 +642,9 @@ def outlet_summary(
             "fraction": q / inflow if q is not None and inflow else None,
             "mean_pressure_pa": p * rho if p is not None else None,
         }
-        if o.get("bc_p") == "rcr":
+        if o.get("type") == "rcr":
             entry |= {k: o[k] for k in ("r_p", "c", "r_d", "p_distal_pa")}
+            entry["condition"] = "pressure" if o.get("bc_p") == "rcr" else "flow share"
         out.append(entry)
     q_out = [e["flow_rate_m3_s"] for e in out]
     total = float(sum(float(q) for q in q_out if q is not None)) if q_out and None not in q_out else None
