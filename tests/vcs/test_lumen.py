@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from conftest import sweep, vcs_in_process
 
-from vcs.cfd.sizing import choose_cell_size
 from vcs.errors import VCSInputError
 from vcs.io import Surface, read_surface
 from vcs.lumen import build_lumen, read_lumen_surface, write_lumen
@@ -137,30 +136,13 @@ def test_vcs_lumen_command(shared_data, tmp_path):
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
 
 
-SIZES = {"inlet_diameter_m": 0.02, "outlet_diameter_m": 0.016, "narrowest_diameter_m": 0.015, "narrowest_tau": 0.5}
-MESH = {
-    "cell_size": "auto",
-    "cells_across_end": 12,
-    "cells_across_narrowest": 8,
-    "cells_across_branch": 6,
-    "max_cells": 10**7,
-}
+def test_branch_ends_are_refined_to_the_cells_asked_for():
+    from vcs.cfd.case import branch_levels
 
-
-def test_auto_cell_size_resolves_the_smallest_branch():
-    got = choose_cell_size(MESH, {**SIZES, "branch_diameters_m": {"branch_1": 0.008, "branch_2": 0.006}}, 1e-5)
-    assert got["governed_by"] == "smallest branch" and got["cell_size_m"] == pytest.approx(0.001)
-    assert got["cells_across_branch"]["branch_2"] == pytest.approx(6.0)
-    assert "branch_2" in got["why"]
-    # large branches do not change the end-governed size (0.016 / 12)
-    big = choose_cell_size(MESH, {**SIZES, "branch_diameters_m": {"branch_1": 0.015}}, 1e-5)
-    assert big["governed_by"] == "smallest end" and big["cell_size_m"] == pytest.approx(0.00133)
-
-
-def test_a_given_cell_size_too_coarse_for_a_branch_is_refused_in_one_line():
-    sizes = {**SIZES, "branch_diameters_m": {"branch_1": 0.008, "branch_3": 0.004}}
-    with pytest.raises(VCSInputError, match=r"branch_3 \(d = 4 mm\) is only 2\.0 cells across.*at most 1\.33 mm") as e:
-        choose_cell_size({**MESH, "cell_size": 0.002}, sizes, 1e-5)
-    assert "\n" not in str(e.value)
-    ok = choose_cell_size({**MESH, "cell_size": 0.0013}, sizes, 1e-5)  # 3.1 cells across: allowed
-    assert ok["cells_across_branch"]["branch_3"] == pytest.approx(0.004 / 0.0013)
+    hb = 0.004  # background cell: 4 mm; outlets at level 1 (2 mm)
+    got = branch_levels({"branch_1": 0.008, "branch_2": 0.0036}, hb, [1, 1], 8.0)
+    # 8 across 8 mm needs 1 mm: level 2; 8 across 3.6 mm needs 0.45 mm: level 4 (0.25 mm)
+    assert got["branch_1"]["level"] == [2, 2] and got["branch_1"]["cells_across"] == pytest.approx(8.0)
+    assert got["branch_2"]["level"] == [4, 4] and got["branch_2"]["cells_across"] == pytest.approx(14.4)
+    # a branch already resolved at the outlet level keeps it
+    assert branch_levels({"branch_1": 0.05}, hb, [1, 2], 8.0)["branch_1"]["level"] == [1, 2]

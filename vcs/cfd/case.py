@@ -277,6 +277,43 @@ def render_files(case_dir: Path, state: dict[str, Any], files: list[str], **extr
         out.write_text(env.get_template(rel).render(**ctx))
 
 
+def branch_levels(
+    diameters: dict[str, float], hb: float, outlet_level: list[int], cells_across: float
+) -> dict[str, dict[str, Any]]:
+    """snappyHexMesh surface levels of the branch ends of a surface geometry (``branch_<k>``).
+
+    A side branch is narrower than the section's ends that size the lumen cell; instead of a
+    finer lumen everywhere, each branch end (d_k = 2 sqrt(A_k / pi)) is refined to at least
+    ``cells_across`` cells across: level L_k = max(outlet level, ceil(log2(hb cells_across / d_k)))
+    with hb the background cell (cell at level L: hb / 2^L); no finer than the outlets when they already
+    are. The branch's own lumen keeps the
+    lumen cell away from its end (the atlas measures the section, not the branches).
+
+    Parameters
+    ----------
+    diameters : dict of str -> float, m
+        Equivalent diameter of each branch end.
+    hb : float, m
+        Background cell size.
+    outlet_level : [int, int]
+        (min, max) snappy level of the outlet solids.
+    cells_across : float
+        ``cfd.mesh.cells_across_branch``.
+
+    Returns
+    -------
+    dict of str -> dict
+        Per branch: ``level`` [min, max], ``cell_size_m`` and ``cells_across`` (as obtained).
+    """
+    out = {}
+    for name, d in diameters.items():
+        need = int(np.ceil(np.log2(max(hb * cells_across / d, 1.0)) - 1e-9))
+        level = [int(outlet_level[0]), int(outlet_level[1])] if need <= int(outlet_level[1]) else [need, need]
+        h = hb / 2 ** level[1]
+        out[name] = {"level": level, "cell_size_m": h, "cells_across": d / h}
+    return out
+
+
 def _end_plane(tris: NDArray[np.floating], role: str) -> dict[str, Any]:
     """Area centroid (m) and unit outward normal of an inlet / outlet / branch solid (empty for a wall)."""
     if role not in ("inlet", "outlet"):
@@ -460,7 +497,7 @@ def render_case(
         sizes = vessel_sizes(model)  # type: ignore[arg-type]
     else:
         sizes = stl_sizes(solids, roles)
-    # a surface geometry's side branches (branch_<k>): every branch end is sized too
+    # a surface geometry's side branches (branch_<k>): their ends are refined (branch_levels below)
     sizes["branch_diameters_m"] = {
         k: 2.0 * float(np.sqrt(surface_area(t) / np.pi)) for k, t in solids.items() if k.lower().startswith("branch")
     }
@@ -481,6 +518,9 @@ def render_case(
         "other": up(m["surface_level"]),
     }
 
+    branch = branch_levels(sizes["branch_diameters_m"], hb, level["outlet"], float(m["cells_across_branch"]))
+    solid_level = {name: branch[name]["level"] if name in branch else level[roles[name]] for name in solids}
+
     # inflow: the patient's, or the config's (fixed or scaled by the inlet area)
     inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
     inflow = choose_inflow(
@@ -497,7 +537,9 @@ def render_case(
     outlets = case_outlets(solids, roles, cfd, inflow["flow_rate_m3_s"], waveform)
     jet = jet_region(solids, cfd, background=hb, min_level=k)
     finest = max(
-        [k, *level["wall"], *level["inlet"], *level["outlet"], *level["other"]] + ([jet["level"]] if jet else [])
+        [k, *level["wall"], *level["inlet"], *level["outlet"], *level["other"]]
+        + [lv[1] for lv in solid_level.values()]
+        + ([jet["level"]] if jet else [])
     )
     if m["background_frame"] == "inlet":
         h_inlet = hb / 2 ** max([level["inlet"][1]] + ([jet["level"]] if jet else []))
@@ -546,10 +588,10 @@ def render_case(
                 "name": name,
                 "role": roles[name],
                 "patch_type": "wall" if roles[name] == "wall" else "patch",
-                "level": level[roles[name]],
+                "level": solid_level[name],
                 "area_m2": surface_area(t),
                 **_end_plane(t, roles[name]),
-                "cell_size_m": hb / 2 ** level[roles[name]][1],
+                "cell_size_m": hb / 2 ** solid_level[name][1],
             }
             for name, t in solids.items()
         ],
@@ -568,6 +610,7 @@ def render_case(
             "cell_size": sizing,
             "background": bg,
             "levels": {"surface": level["other"], "lumen": k, **{r: level[r] for r in ("wall", "inlet", "outlet")}},
+            "branches": branch,
             "smallest_cell_m": hb / 2**finest,
             "min_patch_faces": int(m["min_patch_faces"]),
         },

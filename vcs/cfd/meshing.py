@@ -150,5 +150,7 @@ def patch_check(case_dir: Path, state: dict[str, Any]) -> dict[str, Any]:
             "patient": "lower the patient's cell_size_mm in the patients sheet",
             "auto": "raise cfd.mesh.cells_across_end (or give a smaller cfd.mesh.cell_size)",
         }.get(str(source), "lower cfd.mesh.cell_size")
+        if lost and all(p.startswith("branch") for p in lost):  # only side branches lost: their own refinement
+            advice = "raise cfd.mesh.cells_across_branch (the branch ends' refinement)"
         reason = "; ".join(problems) + (f"; {advice}" if lost else "")
     return {"ok": not problems, "patches": patches, "background_faces": bg, "problems": problems, "reason": reason}

@@ -43,7 +43,7 @@ DEFAULTS: dict[str, Any] = {
         "cell_size": "auto",  # lumen cell size [m], or "auto": from the vessel (vcs.cfd.sizing)
         "cells_across_end": 12,  # auto: at least this many cells across the smaller end diameter
         "cells_across_narrowest": 8,  # auto: ... and across the narrowest section
-        "cells_across_branch": 6,  # auto: ... and across every branch end (geometry: surface)
+        "cells_across_branch": 8,  # every branch end (geometry: surface) refined to this many cells across
         "max_cells": 1_000_000,  # auto: estimated lumen cells (V / h^3) above this coarsen h (recorded)
         "max_background_cells": 100_000,  # blockMesh box cells; above: coarser box, levels raised
         "min_patch_faces": 20,  # each STL solid must become a patch of at least this many faces

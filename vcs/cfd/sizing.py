@@ -175,23 +175,6 @@ def cell_size_value(value: Any, what: str) -> float | str:
     return float(value)
 
 
-MIN_CELLS_ACROSS_BRANCH = 3
-"""Fewest cells across a branch end a case may have: below it the branch is lost or blocked in snapping."""
-
-
-def _check_branches(branches: dict[str, float], h: float, why: str) -> None:
-    """One-line VCSInputError when an end of a side branch is too small for the cell size ``h`` (m)."""
-    small = {k: d for k, d in branches.items() if d / h < MIN_CELLS_ACROSS_BRANCH}
-    if small:
-        name, d = min(small.items(), key=lambda kv: kv[1])
-        raise VCSInputError(
-            f"the end of {name} (d = {d * 1e3:.3g} mm) is only {d / h:.1f} cells across at cell size {h * 1e3:.3g} mm "
-            f"({why}); at least {MIN_CELLS_ACROSS_BRANCH} are needed: set a cell size of at most "
-            f"{d / MIN_CELLS_ACROSS_BRANCH * 1e3:.3g} mm for this patient (cell_size_mm), or cut that branch "
-            "off the surface"
-        )
-
-
 def choose_cell_size(
     mesh: dict[str, Any], sizes: dict[str, Any], volume: float, *, override: float | None = None
 ) -> dict[str, Any]:
@@ -227,7 +210,6 @@ def choose_cell_size(
     """
     d_end = min(sizes["inlet_diameter_m"], sizes["outlet_diameter_m"])
     d_narrow = sizes["narrowest_diameter_m"]
-    branches = sizes.get("branch_diameters_m") or {}
     n_end = float(mesh["cells_across_end"])
     n_narrow = float(mesh["cells_across_narrowest"])
     max_cells = int(mesh["max_cells"])
@@ -251,12 +233,6 @@ def choose_cell_size(
         else:
             h, governed = _floor3(h_end), "smallest end"
             why = f"{n_end:g} cells across the smallest end (d = {d_end * mm:.3g} mm)"
-        if branches:
-            n_branch = float(mesh.get("cells_across_branch", MIN_CELLS_ACROSS_BRANCH))
-            name, d_b = min(branches.items(), key=lambda kv: kv[1])
-            if _floor3(d_b / n_branch) < h:
-                h, governed = _floor3(d_b / n_branch), "smallest branch"
-                why = f"{n_branch:g} cells across the smallest branch end ({name}, d = {d_b * mm:.3g} mm)"
         if volume / h**3 > max_cells:
             h_cap = _ceil3((volume / max_cells) ** (1.0 / 3.0))
             why = (
@@ -266,12 +242,10 @@ def choose_cell_size(
             h, governed = h_cap, "max_cells"
         mine = " (the patient's cell_size_mm)" if override is not None else ""
         why = f"auto{mine}: {why}"
-    _check_branches(branches, h, why)
     return {
         "cell_size_m": h,
         "source": source,
         "governed_by": governed,
-        "cells_across_branch": {k: d / h for k, d in branches.items()},
         "cells_across_end": d_end / h,
         "cells_across_narrowest": d_narrow / h,
         "requested": requested,
