@@ -283,7 +283,9 @@ def test_build_atlas_of_a_pulsatile_cohort_from_fields_npz(tmp_path):
 
 
 def test_marker_map_and_explained_variance_panels():
-    from vcs.atlas.plots import _plt, variance_groups, wall_map_figure
+    from matplotlib.colors import to_rgb
+
+    from vcs.atlas.plots import LEFT_OUT_NOTE, NAN_COLOUR, _plt, variance_groups, wall_map_figure
 
     models, fields, _, _ = pulsatile_cohort(4)
     atlas = compute_atlas(models, fields, {}, n_modes=2)
@@ -307,8 +309,8 @@ def test_marker_map_and_explained_variance_panels():
         assert [im.get_clim() for im in images] == [(0.0, 2.0), (0.0, 2.0), (0.0, 1.0)]
         assert images[0].get_array().shape == (len(theta), len(tau))  # tau along x
         assert np.ma.is_masked(images[0].get_array()[2, 3])  # NaN drawn as 'bad' (grey), not a value
-        assert images[0].cmap.get_bad()[:3] == pytest.approx((0.7, 0.7, 0.7))
-        assert fig.get_suptitle() == "scale; grey: cells left out of the PCA (not finite for some patient)"
+        assert images[0].cmap.get_bad()[:3] == pytest.approx(to_rgb(NAN_COLOUR))  # grey
+        assert fig.get_suptitle() == f"scale; {LEFT_OUT_NOTE}"
         colour_bars = [ax for ax in fig.axes if not ax.images and ax.get_label() == "<colorbar>"]
         assert len(colour_bars) == 1 and colour_bars[0].get_xlabel() == "TAWSS (Pa)"
     finally:

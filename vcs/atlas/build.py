@@ -41,7 +41,8 @@ def build_atlas(
     variances, scores, regression R^2 with its status and skill), ``atlas.npz`` (every PCA's mean,
     modes, sigma, scores, as ``shape_*`` and ``flow_{field}_*`` with ``{field}`` the
     :func:`vcs.atlas.pca.field_slug` of the flow field, e.g. ``flow_phase_peak_systole_U_mean``,
-    and ``flow_{field}_support`` of a wall marker that left cells out; the field grid; the
+    and ``flow_{field}_support`` of a wall field that left cells out (mean and modes NaN there:
+    :data:`vcs.atlas.cohort.NON_FINITE_RULE`, recorded in atlas.json ``wall_fields``); the field grid; the
     ``phase_names`` of a pulsatile cohort) and, with ``figures``, the VTP/VTU files of
     :func:`vcs.atlas.plots.write_atlas_figures` in ``out_dir`` and its PNGs in ``figure_dir``.
     A pulsatile cohort's fields (cycle averages, wall markers, phase fields) go through as they

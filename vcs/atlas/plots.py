@@ -21,8 +21,10 @@ and its ``png_dir`` (PNG, default ``out_dir/figures``; each figure is written on
   OSI, log10_RRT, ECAP and the phase fields) on the mean shape's grid; per field and mode the
   mode's +-2 sigma fields and a ``{field}_mode{k}_top20`` mask (cells in the top 20 % of the
   variation). Array names use :func:`vcs.atlas.pca.field_slug` (``phase_peak_systole_U_mean``);
-  wall fields are on the rho_n = 1 layer (zero inside); a wall marker's cells left out of its PCA
-  are NaN;
+  wall fields are on the rho_n = 1 layer (zero inside); a wall field's cells left out of its PCA
+  (missing for some patient: a side branch's ostium, a diverging RRT;
+  :data:`vcs.atlas.cohort.NON_FINITE_RULE`) are NaN there, and grey in the PNGs (:data:`NAN_COLOUR`,
+  with a note saying so);
 * ``flow_{field}_mode{k}.png`` (field slug, e.g. ``flow_phase_peak_systole_U_mode1.png``):
   theta-clipped lumen views (paper Figs. 8-9) of U, p, WSS and the phase fields, and (tau, theta)
   maps of the wall markers (:func:`wall_map_png`, e.g. ``flow_TAWSS_mode1.png``): mean - 2 sigma,
@@ -53,6 +55,10 @@ from vcs.atlas.pca import (
 )
 from vcs.atlas.procrustes import TWO_PI
 from vcs.grid import from_vcs_components, grid_points, grid_to_vtk, local_frame
+
+#: Colour of NaN values (wall cells left out of a PCA) in every figure, and the note that says so.
+NAN_COLOUR = "#b3b3b3"  # matplotlib "0.7"; pyvista takes no grey level
+LEFT_OUT_NOTE = "grey: left out of the PCA (missing for a patient)"
 
 if TYPE_CHECKING:
     import pyvista
@@ -587,6 +593,7 @@ def clipped_view_plotter(
             scalars=label,
             cmap=cmap,  # type: ignore[arg-type]  # any matplotlib colour-map name
             clim=clim if i in shared else (0.0, 1.0),
+            nan_color=NAN_COLOUR,
             show_scalar_bar=i == bar_panel,
             scalar_bar_args={
                 "title": label,
@@ -651,7 +658,8 @@ def clipped_view_png(
     theta : (n_theta,) float, rad
     panels : list of (title, (n_tau, n_theta, n_rho) float array, colour map name)
         Panels sharing the first panel's colour map share ``clim`` and one colour bar; the others
-        are drawn on (0, 1) without a colour bar (a mask).
+        are drawn on (0, 1) without a colour bar (a mask). NaN values (wall cells left out of a
+        PCA) are drawn in :data:`NAN_COLOUR` (grey).
     path : str or Path
         Output PNG.
     label : str
@@ -712,7 +720,8 @@ def clipped_view_figure(
     for ax, (title, values, cmap) in zip(axes[0], panels):
         sec = np.concatenate([values[:, j_pi, ::-1], values[:, 0, 1:]], axis=1)
         lim = clim if cmap == panels[0][2] else (0.0, 1.0)
-        im = ax.imshow(sec.T, origin="lower", aspect="auto", cmap=cmap, extent=(0, 1, -1, 1), vmin=lim[0], vmax=lim[1])
+        cm = plt.get_cmap(cmap).with_extremes(bad=NAN_COLOUR)
+        im = ax.imshow(sec.T, origin="lower", aspect="auto", cmap=cm, extent=(0, 1, -1, 1), vmin=lim[0], vmax=lim[1])
         if cmap == panels[0][2]:
             shared_axes.append(ax)
             image = im
@@ -765,7 +774,7 @@ def wall_map_figure(
 
     The panels whose colour map is the first panel's share ``clim`` and one colour bar titled
     ``label`` (at most 5 ticks); the others (the top-20 % mask) are drawn on (0, 1) without one.
-    NaN values (wall cells left out of a marker's PCA, :data:`vcs.atlas.cohort.NON_FINITE_RULE`)
+    NaN values (wall cells left out of the field's PCA, :data:`vcs.atlas.cohort.NON_FINITE_RULE`)
     are drawn grey, and the note (a small line above the panels) says so.
 
     Parameters
@@ -803,7 +812,7 @@ def wall_map_figure(
         shared = cmap == panels[0][2]
         left_out |= shared and bool(np.isnan(v).any())
         lim = clim if shared else (0.0, 1.0)
-        cm = plt.get_cmap(cmap).with_extremes(bad="0.7")
+        cm = plt.get_cmap(cmap).with_extremes(bad=NAN_COLOUR)
         im = ax.imshow(v.T, origin="lower", aspect="auto", cmap=cm, extent=extent, vmin=lim[0], vmax=lim[1])
         if shared:
             shared_axes.append(ax)
@@ -816,7 +825,7 @@ def wall_map_figure(
         cb.locator = MaxNLocator(5)
         cb.update_ticks()
     if left_out:
-        note = (note + "; " if note else "") + "grey: cells left out of the PCA (not finite for some patient)"
+        note = (note + "; " if note else "") + LEFT_OUT_NOTE
     if note:  # above the panels: constrained layout makes room for it (a figure text would overlap the bar)
         fig.suptitle(note, fontsize=7, x=0.01, ha="left")
     return fig
@@ -895,15 +904,17 @@ def write_flow_files(
             ]
             values = [v[:, :, -1] if on_wall else v for _, v, _ in panels[:3]]  # inside a wall field: zeros
             clim = robust_limits(values)
+            left_out = any(bool(np.isnan(v).any()) for v in values)
             key = f"flow_{field_slug(f)}_mode{k + 1}"
             png = pngs / f"{key}.png"
             if len(shape) == 2:  # a scalar wall map (the wall markers): drawn over (tau, theta)
                 maps = [(t, v[:, :, -1], c) for t, v, c in panels]
                 wall_map_png(tau, theta, maps, png, label=label, clim=clim, note=note)
             else:
+                shown = f"{note}\n{LEFT_OUT_NOTE}" if left_out else note
                 renderers.add(
                     clipped_view_png(
-                        info["points"], theta, panels, png, label=label, clim=clim, view_normal=view, note=note
+                        info["points"], theta, panels, png, label=label, clim=clim, view_normal=view, note=shown
                     )
                 )
             files[key] = _relative(png, out)
