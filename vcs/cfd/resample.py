@@ -459,6 +459,54 @@ def _sample_wall(
     return out
 
 
+def _sample_volume(
+    internal: pv.DataSet,
+    patches: dict[str, pv.PolyData],
+    P: NDArray[np.floating],
+    on_wall: NDArray[np.bool_],
+    method: str,
+) -> tuple[NDArray[np.floating], NDArray[np.floating], dict[str, Any]]:
+    """U (N, 3) and p (N,) at the grid points ``P`` (case units) and the counts of the points
+    outside the CFD mesh: no-slip (U = 0) on the wall (``on_wall``), nearest cell inside."""
+    import pyvista as pv
+
+    probe = pv.PolyData(P).sample(internal, pass_cell_data=False, pass_point_data=False)
+    missing = ~np.asarray(probe.point_data["vtkValidPointMask"]).astype(bool)
+    centres = np.asarray(internal.cell_centers().points)
+    cell_U = np.asarray(internal.cell_data["U"], float)
+    cell_p = np.asarray(internal.cell_data["p"], float)
+    if method == "probe":
+        U = np.asarray(probe.point_data["U"], float).copy()
+        p = np.asarray(probe.point_data["p"], float).copy()
+    else:
+        Xs, VU, Vp = [centres], [cell_U], [cell_p]
+        for b in patches.values():
+            if "U" in b.cell_data and "p" in b.cell_data:
+                Xs.append(np.asarray(b.cell_centers().points))
+                VU.append(np.asarray(b.cell_data["U"], float))
+                Vp.append(np.asarray(b.cell_data["p"], float))
+        X = np.concatenate(Xs)
+        vals = mls_interpolate(P, X, np.column_stack([np.concatenate(VU), np.concatenate(Vp)]))
+        U, p = vals[:, :3], vals[:, 3]
+    # points outside the CFD mesh: no-slip on the wall, nearest cell inside the lumen
+    interior_missing = missing & ~on_wall
+    d, j = cKDTree(centres).query(P[interior_missing], workers=-1)
+    U[interior_missing] = cell_U[j]
+    p[interior_missing] = cell_p[j]
+    if method == "probe":
+        wall_missing = missing & on_wall
+        p[wall_missing] = cell_p[cKDTree(centres).query(P[wall_missing], workers=-1)[1]]
+    U[on_wall] = 0.0
+    counts = {
+        "n_outside_mesh": np.int64(missing.sum()),
+        "n_wall_noslip": np.int64(on_wall.sum()),
+        "n_wall_outside_mesh": np.int64((missing & on_wall).sum()),
+        "n_interior_nearest": np.int64(interior_missing.sum()),
+        "interior_nearest_max_distance": np.float64(d.max() if d.size else 0.0),
+    }
+    return U, p, counts
+
+
 def sample_mesh(
     internal: pv.DataSet,
     patches: dict[str, pv.PolyData],
@@ -517,8 +565,6 @@ def sample_mesh(
     VCSInputError
         For an unknown method, a model without a wall model, or a wall patch without WSS.
     """
-    import pyvista as pv
-
     if method not in ("mls", "probe"):
         raise VCSInputError(f"method must be 'mls' or 'probe', not {method!r}")
     t0 = _time.perf_counter()
@@ -529,33 +575,7 @@ def sample_mesh(
     P = pts_mm.reshape(-1, 3) * rho_scale
     on_wall = np.broadcast_to(rho_n == 1.0, shape).ravel()
 
-    probe = pv.PolyData(P).sample(internal, pass_cell_data=False, pass_point_data=False)
-    missing = ~np.asarray(probe.point_data["vtkValidPointMask"]).astype(bool)
-    centres = np.asarray(internal.cell_centers().points)
-    cell_U = np.asarray(internal.cell_data["U"], float)
-    cell_p = np.asarray(internal.cell_data["p"], float)
-    if method == "probe":
-        U = np.asarray(probe.point_data["U"], float).copy()
-        p = np.asarray(probe.point_data["p"], float).copy()
-    else:
-        Xs, VU, Vp = [centres], [cell_U], [cell_p]
-        for b in patches.values():
-            if "U" in b.cell_data and "p" in b.cell_data:
-                Xs.append(np.asarray(b.cell_centers().points))
-                VU.append(np.asarray(b.cell_data["U"], float))
-                Vp.append(np.asarray(b.cell_data["p"], float))
-        X = np.concatenate(Xs)
-        vals = mls_interpolate(P, X, np.column_stack([np.concatenate(VU), np.concatenate(Vp)]))
-        U, p = vals[:, :3], vals[:, 3]
-    # points outside the CFD mesh: no-slip on the wall, nearest cell inside the lumen
-    interior_missing = missing & ~on_wall
-    d, j = cKDTree(centres).query(P[interior_missing], workers=-1)
-    U[interior_missing] = cell_U[j]
-    p[interior_missing] = cell_p[j]
-    if method == "probe":
-        wall_missing = missing & on_wall
-        p[wall_missing] = cell_p[cKDTree(centres).query(P[wall_missing], workers=-1)[1]]
-    U[on_wall] = 0.0
+    U, p, counts = _sample_volume(internal, patches, P, on_wall, method)
     t_probe = _time.perf_counter()
 
     U = U.reshape(*shape, 3)
@@ -577,11 +597,7 @@ def sample_mesh(
         "rho_scale": np.float64(rho_scale),
         "rho_density": np.float64(rho_density),
         "n_points": np.int64(P.shape[0]),
-        "n_outside_mesh": np.int64(missing.sum()),
-        "n_wall_noslip": np.int64(on_wall.sum()),
-        "n_wall_outside_mesh": np.int64((missing & on_wall).sum()),
-        "n_interior_nearest": np.int64(interior_missing.sum()),
-        "interior_nearest_max_distance": np.float64(d.max() if d.size else 0.0),
+        **counts,
     }
     wall = patches.get(wall_patch)
     if wall is not None:
@@ -612,15 +628,15 @@ def sample_mesh(
     log.info(
         "sampled %d points: %d outside the CFD mesh (%d on the wall, %d interior -> nearest cell, max %.3g)",
         P.shape[0],
-        missing.sum(),
-        (missing & on_wall).sum(),
-        interior_missing.sum(),
-        out["interior_nearest_max_distance"],
+        counts["n_outside_mesh"],
+        counts["n_wall_outside_mesh"],
+        counts["n_interior_nearest"],
+        counts["interior_nearest_max_distance"],
     )
-    if interior_missing.mean() > 0.05:
+    if counts["n_interior_nearest"] > 0.05 * (~on_wall).sum():
         log.warning(
             "%.1f%% of the interior grid points are outside the CFD mesh: do the model and the case match?",
-            100 * interior_missing.mean(),
+            100 * counts["n_interior_nearest"] / (~on_wall).sum(),
         )
     return out
 
