@@ -192,9 +192,9 @@ def build_lumen(surf: Surface, inlet_center_mm: NDArray[np.floating], outlet_cen
     # each candidate with its patch: a cap's faces, or an open loop to close with a fan
     loop_of: dict[int, NDArray[np.integer]] = {}
     for loop in listing.loops:
-        c, _, _ = polygon_properties(v[loop])
+        centre = polygon_properties(v[loop])[0]
         for i, cand in enumerate(listing.candidates):
-            if cand.kind == "open loop" and np.allclose(cand.end.center, c, atol=1e-9):
+            if cand.kind == "open loop" and np.allclose(cand.end.center, centre, atol=1e-9):
                 loop_of[i] = loop
     cands = [(c, loop_of.get(i)) for i, c in enumerate(listing.candidates)]
     i_in = _match(cands, np.asarray(inlet_center_mm, float), "inlet", surf.units)
@@ -206,12 +206,12 @@ def build_lumen(surf: Surface, inlet_center_mm: NDArray[np.floating], outlet_cen
     verts = [v]
     n = len(v)
     patch_faces: list[tuple[int, NDArray[np.integer]]] = []
-    for i, (c, loop) in enumerate(cands):
-        if loop is None:
-            patch_faces.append((i, f[c.faces]))
+    for i, (cand, rim) in enumerate(cands):
+        if rim is None:
+            patch_faces.append((i, f[cand.faces]))
         else:
-            verts.append(polygon_properties(v[loop])[0][None])
-            patch_faces.append((i, _fan(v, loop, n)))
+            verts.append(polygon_properties(v[rim])[0][None])
+            patch_faces.append((i, _fan(v, rim, n)))
             n += 1
     wall = f[listing.wall_mask]
     holes = [lp for lp in listing.loops if not any(lp is loop for loop in loop_of.values())]
@@ -235,9 +235,9 @@ def build_lumen(surf: Surface, inlet_center_mm: NDArray[np.floating], outlet_cen
     for (i, _), b in zip(patch_faces, blocks[1:]):
         name, role = names[i]
         solids[name] = vertices[b]
-        c = cands[i][0]
-        kind = c.kind + (f" {c.label}" if c.label else "")
-        ends.append(LumenEnd(name, role, c.end.center, cast(NDArray[np.floating], c.end.normal), areas[i], kind))
+        end = cands[i][0]
+        kind = end.kind + (f" {end.label}" if end.label else "")
+        ends.append(LumenEnd(name, role, end.end.center, cast(NDArray[np.floating], end.end.normal), areas[i], kind))
     order = {"inlet": 0, "outlet": 1}
     ends.sort(key=lambda e: (order.get(e.name, 2), -e.area))
     solids = {"wall": solids["wall"], **{e.name: solids[e.name] for e in ends}}
