@@ -85,3 +85,22 @@ def test_bifurcation_surface_murray_and_resistance_outlets(tmp_path, workdir_fac
         r_k = r_total / (r3[n] / sum(r3.values()))
         assert o["r_p"] + o["r_d"] == pytest.approx(r_k, rel=1e-6)
         assert o["mean_pressure_pa"] == pytest.approx(r_k * o["flow_rate_m3_s"], rel=0.02), (n, o, rho)
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason=f"real vessel meshes not available ({SHARED} is absent)")
+def test_a_surface_that_cannot_be_a_lumen_is_a_patient_failure(tmp_path, workdir_factory):
+    """The coarse TAH aorta has rounded (closed) ends: no plane for an inlet patch. With
+    cfd_geometry surface the patient stops at the lumen stage with the one line of `vcs lumen`,
+    passed on to status.json (the atlas lists it as excluded), without running OpenFOAM."""
+    from vcs.atlas.cohort import status_exclusion
+
+    row = {"id": "tah", "mesh": str(SHARED / "sphinxsys_tah_aorta_capped_coarse.stl"), "units": "mm"}
+    row |= {"inlet": "-23.0,-202.2,-1177.9", "outlet": "6.6,-123.6,-1246.3", "cfd_geometry": "surface"}
+    wd = workdir_factory(tmp_path, [row])
+    wd.snakemake("--cores", "1", "results/patients/tah/status.json", timeout=600)
+    st = json.loads((tmp_path / "results" / "patients" / "tah" / "status.json").read_text())
+    assert st["failed"] is True and st["stage"] == "lumen"
+    assert "rounded (closed) end(s)" in st["reason"] and "cfd_geometry model" in st["reason"]
+    assert "\n" not in st["reason"] and "Traceback" not in st["reason"]
+    assert status_exclusion(st) == st["reason"]
+    assert not (tmp_path / "results" / "patients" / "tah" / "case" / "constant" / "polyMesh").exists()

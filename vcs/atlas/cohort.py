@@ -57,7 +57,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("vcs.atlas")
 
 #: Stages of a patient's chain, in order (the ``stage`` of an exclusion in atlas.json).
-STAGES = ("fit", "wall", "case", "mesh", "solve", "sampling")
+STAGES = ("fit", "wall", "lumen", "case", "mesh", "solve", "sampling")  # wall: model geometry; lumen: surface
 #: How a wall field's PCA treats missing values (atlas.json ``wall_fields`` and ``wall_markers``).
 NON_FINITE_RULE = (
     "a wall cell where any included patient's wall field (WSS, TAWSS, OSI, log10_RRT, ECAP, a phase's "
@@ -98,7 +98,7 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     legacy status of the removed SIMPLE-iterate averaging with ``converged_relaxed`` true is
     included (new runs never write it). The reason quotes the
     status's own ``reason``/``error``/``message``; a failure recorded before the solver (a status
-    whose ``stage`` is ``fit``, ``wall`` or ``case``: the workflow propagates those), or a mesh
+    whose ``stage`` is ``fit``, ``wall``, ``lumen`` or ``case``: the workflow propagates those), or a mesh
     that stopped the patient before the solver (``stage`` ``mesh``, ``mesh_ok`` false: an end lost
     in meshing, a leak), is its reason as is.
 
@@ -119,7 +119,7 @@ def status_exclusion(status: Mapping[str, Any] | None, *, accept_relaxed: bool =
     detail = next((str(status[k]) for k in ("reason", "error", "message") if status.get(k)), "")
     state = str(status.get("status", status.get("state", ""))).lower()
     failed = status.get("failed") is True or state in ("failed", "error", "crashed", "diverged", "timeout")
-    if failed and status.get("stage") in ("fit", "wall", "case") and detail:
+    if failed and status.get("stage") in ("fit", "wall", "lumen", "case") and detail:
         return detail
     if status.get("stage") == "mesh" and status.get("mesh_ok") is False and detail:
         return detail  # run_case's patch check: already what happened, in words
