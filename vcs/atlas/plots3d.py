@@ -1,0 +1,548 @@
+"""3-D atlas figures (paper Figs. 6-9), rendered off-screen with pyvista.
+
+Every view is set in the mean shape's own frame (:class:`ViewFrame`): the plane that best fits
+the mean centerline, its long axis up (the outlet at the bottom), its in-plane cross axis
+"anterior" (the inlet's side: the ascending aorta lies in front of the descending one), its
+normal the sagittal direction. Views: ``sagittal`` (from +normal: the whole centerline in the
+picture plane), ``coronal`` and ``anterior`` (from +anterior), ``posterior`` (from -anterior).
+
+Figures (PNG, written by :func:`write_3d_figures`; ``{field}`` a :func:`vcs.atlas.pca.field_slug`):
+
+* ``shape_mean_3d.png``: the mean wall coloured by its radius rho_w, sagittal and coronal;
+* ``shape_mode{k}_3d.png``: the mean - 2 sigma and mean + 2 sigma walls of shape mode k coloured
+  by the radius change against the mean (the mean as a grey ghost), and the three centerlines;
+  one row per view (sagittal, coronal);
+* ``flow_{field}_mean_3d.png``: a wall field (WSS, TAWSS, OSI, log10 RRT, ECAP) on the wall,
+  anterior and posterior; p on the wall from behind and in the clipped lumen; |U| in the clipped
+  lumen with streamlines;
+* ``flow_{field}_mode{k}_3d.png``: mean - 2 sigma, mean, mean + 2 sigma and the top-20 % region of
+  flow mode k, on the wall (anterior and posterior rows) or in the clipped lumen.
+
+The clipped lumen is the measurement grid with the half of its theta range that faces the camera
+removed (:func:`facing_half`), so the cut shows the field inside. All the figures of one field
+share its colour limits (:func:`field_limits`: 2nd-98th percentile of the mean and every mode's
++-2 sigma values); NaN (wall cells left out of a PCA, e.g. at an ostium) is drawn grey.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from vcs.atlas.pca import field_quantity, field_slug, is_vector_field, mode_deformation
+from vcs.atlas.plots import (
+    BAR_HEIGHT,
+    BAR_Y,
+    LABEL_FONT_PX,
+    LEFT_OUT_NOTE,
+    NAN_COLOUR,
+    NOTE_FONT_PT,
+    TITLE_FONT_PT,
+    PathLike,
+    _scalar,
+    colour_bar_labels,
+    field_label,
+    field_title,
+    robust_limits,
+)
+from vcs.grid import grid_to_vtk
+
+if TYPE_CHECKING:
+    import pyvista
+
+    from vcs.atlas.cohort import Atlas
+    from vcs.atlas.pca import PCA
+    from vcs.vessel import VesselModel
+
+log = logging.getLogger(__name__)
+
+#: Width, height (pixels) of one panel of a 3-D figure.
+PANEL_3D_PX = (340, 400)
+#: Background, text and ghost colours; the top-20 % mask's two colours.
+BACKGROUND, TEXT_COLOUR, GHOST_COLOUR = "white", "black", "#808080"
+MASK_COLOURS = ("#d9d9d9", "#d62728")
+#: Surface lighting: one headlight; a face seen head-on shows its colour-map colour exactly.
+SURFACE_LOOK = {"ambient": 0.35, "diffuse": 0.65, "specular": 0.0, "smooth_shading": True}
+
+
+@dataclass(frozen=True)
+class ViewFrame:
+    """The mean shape's own frame, from which every 3-D figure is seen.
+
+    Attributes
+    ----------
+    centre : (3,) float, mm
+        Centroid of the centerline.
+    up : (3,) float
+        Long axis of the centerline's best-fit plane, pointing away from the outlet c(1).
+    anterior : (3,) float
+        In-plane axis across ``up``, towards the inlet c(0).
+    normal : (3,) float
+        ``up`` x ``anterior``: the plane's normal.
+    size : float, mm
+        Largest extent of the wall's bounding box.
+    wall : (n, 3) float, mm
+        Points of the wall, which the cameras frame.
+    """
+
+    centre: np.ndarray
+    up: np.ndarray
+    anterior: np.ndarray
+    normal: np.ndarray
+    size: float
+    wall: np.ndarray
+
+    @classmethod
+    def from_model(cls, model: VesselModel) -> ViewFrame:
+        """The frame of a vessel model's centerline (principal axes of c(tau) on 101 samples)."""
+        c = model.vcs.curve(np.linspace(0.0, 1.0, 101))
+        centre = c.mean(axis=0)
+        _, _, axes = np.linalg.svd(c - centre)
+        up, ant = axes[0], axes[1]
+        if (c[-1] - centre) @ up > 0:
+            up = -up
+        if (c[0] - centre) @ ant < 0:
+            ant = -ant
+        T, TH = np.meshgrid(np.linspace(0, 1, 41), np.linspace(0, 2 * np.pi, 16), indexing="ij")
+        wall = model.surface_points(T, TH).reshape(-1, 3)
+        return cls(centre, up, ant, np.cross(up, ant), float(np.ptp(wall, axis=0).max()), wall)
+
+    def direction(self, view: str) -> np.ndarray:
+        """Unit vector from the centre towards the camera of ``view``."""
+        return {
+            "sagittal": self.normal,
+            "coronal": self.anterior,
+            "anterior": self.anterior,
+            "posterior": -self.anterior,
+        }[view]
+
+    def set_camera(self, camera: Any, view: str, *, aspect: float) -> None:
+        """Point a pyvista camera at the mean wall from ``view`` (parallel projection): the same
+        scale in every panel of ``view``, the wall inside the band between the title (top 8 %)
+        and the colour bar (bottom 20 %) of a panel of width / height ``aspect``."""
+        d = self.direction(view)
+        right = np.cross(self.up, d)
+        x, y = (self.wall - self.centre) @ right, (self.wall - self.centre) @ self.up
+        band, middle = 0.72, 0.56  # height fraction and centre of the band
+        scale = 1.08 * max(np.ptp(y) / (2 * band), np.ptp(x) / (2 * 0.95 * aspect))
+        focal = self.centre + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * self.up
+        focal = focal - (middle - 0.5) * 2 * scale * self.up
+        camera.focal_point = tuple(focal)
+        camera.position = tuple(focal + 4.0 * self.size * d)
+        camera.up = tuple(self.up)
+        camera.parallel_projection = True
+        camera.parallel_scale = scale
+        camera.clipping_range = (0.1 * self.size, 10.0 * self.size)
+
+
+@dataclass
+class Panel:
+    """One subplot: meshes with their ``add_mesh`` keywords, seen from ``view``, under ``title``."""
+
+    title: str
+    view: str
+    meshes: list[tuple[Any, dict[str, Any]]]
+
+
+@dataclass(frozen=True)
+class ColourBar:
+    """The one colour bar of a figure: title (with units), limits, colour map, and its panel."""
+
+    label: str
+    clim: tuple[float, float]
+    cmap: str
+    panel: int = 0
+
+
+def render_panels(
+    panels: list[Panel],
+    frame: ViewFrame,
+    path: PathLike,
+    *,
+    n_cols: int | None = None,
+    bar: ColourBar | None = None,
+    note: str = "",
+) -> None:
+    """Render ``panels`` (row-major, ``n_cols`` per row; default one row) off-screen to a PNG.
+
+    White background, black text, one headlight; each panel's camera from ``frame``, zoomed to
+    fit. ``bar`` is drawn horizontally at the bottom of its panel (labels below it, its title
+    above: VTK draws a horizontal bar's title over its middle label); ``note`` at the bottom of
+    the first panel.
+
+    Raises
+    ------
+    Exception
+        Whatever VTK raises when no off-screen render window can be opened.
+    """
+    import pyvista as pv
+
+    cols = n_cols or len(panels)
+    rows = -(-len(panels) // cols)
+    w, h = PANEL_3D_PX
+    pl = pv.Plotter(off_screen=True, shape=(rows, cols), window_size=[w * cols, h * rows], lighting="none")
+    try:
+        for i, p in enumerate(panels):
+            pl.subplot(i // cols, i % cols)
+            pl.set_background(BACKGROUND)  # type: ignore[arg-type]  # a colour name
+            pl.add_light(pv.Light(light_type="headlight"), only_active=True)
+            for mesh, kw in p.meshes:
+                pl.add_mesh(mesh, show_scalar_bar=False, **kw)
+            if bar is not None and i == bar.panel:
+                _add_colour_bar(pl, bar)
+            pl.add_text(p.title, position=(0.03, 0.93), viewport=True, font_size=TITLE_FONT_PT, color=TEXT_COLOUR)
+            if note and i == 0:
+                pl.add_text(note, position=(0.03, 0.01), viewport=True, font_size=NOTE_FONT_PT, color=TEXT_COLOUR)
+            frame.set_camera(pl.camera, p.view, aspect=w / h)
+        pl.screenshot(str(path))
+    finally:
+        pl.close()
+
+
+def _add_colour_bar(pl: pyvista.Plotter, bar: ColourBar) -> None:
+    """A horizontal colour bar of ``bar`` in the active subplot (an invisible point carries it)."""
+    import pyvista as pv
+
+    width = 0.8
+    fmt, n_labels = colour_bar_labels(*bar.clim, width_px=width * PANEL_3D_PX[0])
+    carrier = pv.PolyData(np.zeros((1, 3)))
+    carrier.point_data[bar.label] = [bar.clim[0]]
+    pl.add_mesh(
+        carrier,
+        scalars=bar.label,
+        cmap=bar.cmap,  # type: ignore[arg-type]  # any matplotlib colour-map name
+        clim=bar.clim,
+        opacity=0.0,
+        scalar_bar_args={
+            "title": bar.label,
+            "vertical": False,
+            "width": width,
+            "position_x": (1.0 - width) / 2,
+            "position_y": BAR_Y,
+            "height": BAR_HEIGHT,
+            "n_labels": n_labels,
+            "fmt": fmt,
+            "label_font_size": LABEL_FONT_PX,
+            "color": TEXT_COLOUR,
+        },
+    )
+    actor = pl.scalar_bars[bar.label]
+    actor.SetTitle("")
+    actor.SetTextPositionToPrecedeScalarBar()
+    text = pl.add_text(
+        bar.label,
+        position=(0.5, BAR_Y + BAR_HEIGHT + 0.005),
+        viewport=True,
+        font_size=TITLE_FONT_PT,
+        color=TEXT_COLOUR,
+        name="colour_bar_title",
+    )
+    text.prop.justification_horizontal = "center"
+
+
+def coloured(name: str, clim: tuple[float, float], cmap: str) -> dict[str, Any]:
+    """``add_mesh`` keywords of a surface coloured by point data ``name`` (NaN grey)."""
+    return {"scalars": name, "clim": clim, "cmap": cmap, "nan_color": NAN_COLOUR, **SURFACE_LOOK}
+
+
+def mask_look() -> dict[str, Any]:
+    """``add_mesh`` keywords of a 0/1 mask surface (point data ``mask``): grey, the marked cells red."""
+    from matplotlib.colors import ListedColormap
+
+    return {"scalars": "mask", "clim": (0.0, 1.0), "cmap": ListedColormap(MASK_COLOURS), **SURFACE_LOOK}
+
+
+def ghost_look() -> dict[str, Any]:
+    """``add_mesh`` keywords of the mean wall drawn as a translucent grey ghost."""
+    return {"color": GHOST_COLOUR, "opacity": 0.2, "smooth_shading": True}
+
+
+# ---------------------------------------------------------------------------------------------
+# Shape (paper Figs. 6-7)
+# ---------------------------------------------------------------------------------------------
+def wall_polydata(
+    model: VesselModel, values: dict[str, np.ndarray] | None = None, *, n: tuple[int, int] = (101, 48)
+) -> Any:
+    """The wall x(tau, theta) = c(tau) + rho_w (v1 cos theta + v2 sin theta) (Eq. 8) on an
+    (n_tau, n_theta) grid (seam closed), with point data ``values`` of shape (n_tau, n_theta)."""
+    tau = np.linspace(0.0, 1.0, n[0])
+    theta = 2 * np.pi * np.arange(n[1]) / n[1]
+    T, TH = np.meshgrid(tau, theta, indexing="ij")
+    return grid_to_vtk(model.surface_points(T, TH), values or {})
+
+
+def centerline_tube(model: VesselModel, radius: float) -> Any:
+    """The centerline c(tau) as a tube of ``radius`` (mm)."""
+    import pyvista as pv
+
+    return pv.lines_from_points(model.vcs.curve(np.linspace(0.0, 1.0, 101))).tube(radius=radius, n_sides=10)
+
+
+def shape_mean_png(mean: VesselModel, frame: ViewFrame, path: PathLike) -> tuple[float, float]:
+    """Paper Fig. 6: the mean wall coloured by its radius rho_w (mm), sagittal and coronal views.
+
+    Returns the colour limits (2nd-98th percentile of rho_w on the wall).
+    """
+    n = (101, 48)
+    T, TH = np.meshgrid(np.linspace(0, 1, n[0]), 2 * np.pi * np.arange(n[1]) / n[1], indexing="ij")
+    rho = np.asarray(mean.fitted_wall()(T, TH), float)
+    lo, hi = robust_limits([rho])
+    half = max(0.5 * (hi - lo), 0.01 * float(np.mean(rho)))  # a tube: one colour, not round-off noise
+    clim = (0.5 * (lo + hi) - half, 0.5 * (lo + hi) + half)
+    wall = wall_polydata(mean, {"rho_w": rho}, n=n)
+    look = coloured("rho_w", clim, "viridis")
+    panels = [Panel(f"mean shape, {v}", v, [(wall, look)]) for v in ("sagittal", "coronal")]
+    render_panels(panels, frame, path, bar=ColourBar("rho_w (mm)", clim, "viridis", panel=1))
+    return clim
+
+
+def shape_mode_png(pca: PCA, template: VesselModel, mode: int, frame: ViewFrame, path: PathLike) -> tuple[float, float]:
+    """Paper Fig. 7: shape mode ``mode`` (0-based) as its mean - 2 sigma and mean + 2 sigma walls.
+
+    Columns: the -2 sigma wall and the +2 sigma wall coloured by the radius change
+    delta rho_w = rho_w(mode shape) - rho_w(mean) (mm; symmetric limits shared by both walls: the
+    98th percentile of |delta rho_w|), each with the mean wall as a translucent grey ghost; then
+    the centerlines (mean black, -2 sigma blue, +2 sigma red) inside the ghost. Rows: sagittal,
+    coronal. Returns the colour limits.
+    """
+    d = {s: mode_deformation(pca, template, mode, n_sigma=s) for s in (-2.0, 2.0)}
+    lim = float(np.percentile(np.abs(np.concatenate([d[s]["radius_change"].ravel() for s in d])), 98.0))
+    clim = (-max(lim, 1e-6), max(lim, 1e-6))
+    mean = d[2.0]["mean_model"]
+    ghost = (wall_polydata(mean, n=(51, 24)), ghost_look())
+    r = 0.006 * frame.size
+    lines = [(centerline_tube(mean, r), {"color": "black"})]
+    walls = {}
+    for s, colour in ((-2.0, "#2166ac"), (2.0, "#b2182b")):
+        walls[s] = wall_polydata(d[s]["mode_model"], {"delta_rho": d[s]["radius_change"]})
+        lines.append((centerline_tube(d[s]["mode_model"], r), {"color": colour}))
+    look = coloured("delta_rho", clim, "RdBu_r")
+    share = 100 * pca.explained_variance_ratio[mode]
+    panels = []
+    for view in ("sagittal", "coronal"):
+        panels += [
+            Panel(f"mode {mode + 1}: mean - 2 sigma, {view}", view, [(walls[-2.0], look), ghost]),
+            Panel(f"mode {mode + 1}: mean + 2 sigma ({share:.0f} %)", view, [(walls[2.0], look), ghost]),
+            Panel("centerlines: -2 sigma blue, +2 red", view, [ghost, *lines]),
+        ]
+    bar = ColourBar("radius change (mm)", clim, "RdBu_r", panel=1)
+    render_panels(panels, frame, path, n_cols=3, bar=bar)
+    return clim
+
+
+# ---------------------------------------------------------------------------------------------
+# Flow (paper Figs. 8-9)
+# ---------------------------------------------------------------------------------------------
+def facing_half(model: VesselModel, theta: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """Indices of the theta half of the grid that faces away from a camera in ``direction``.
+
+    The removed half is centred on the camera's angle in the (v1, v2) frame (circular mean over
+    tau), so the cut planes at its edges face the camera. Returns n_theta / 2 + 1 contiguous
+    indices (mod n_theta; both cut planes included) of a uniform theta grid.
+    """
+    tau = np.linspace(0.0, 1.0, 21)
+    _, v1, v2 = model.vcs.frame(tau)
+    phi = np.angle(np.sum(np.exp(1j * np.arctan2(v2 @ direction, v1 @ direction))))
+    n = len(theta)
+    start = int(np.rint((phi + np.pi / 2) / (2 * np.pi) * n)) % n
+    return (start + np.arange(n // 2 + 1)) % n
+
+
+def lumen_surface(points: np.ndarray, values: dict[str, np.ndarray], keep: np.ndarray) -> Any:
+    """Outer surface (wall, cut planes, ends) of the measurement grid's theta columns ``keep``."""
+    g = grid_to_vtk(points[:, keep], {k: v[:, keep] for k, v in values.items()}, close_theta=False)
+    return g.extract_surface(algorithm="dataset_surface")
+
+
+def wall_surface(points: np.ndarray, values: dict[str, np.ndarray]) -> Any:
+    """The rho_n = 1 layer of the measurement grid (the wall) with point data ``values``
+    of shape (n_tau, n_theta)."""
+    return grid_to_vtk(points[:, :, -1], values)
+
+
+def streamlines(points: np.ndarray, velocity: np.ndarray, size: float, *, n_seeds: int = 24) -> Any:
+    """Streamlines of the mean velocity (Cartesian, (n_tau, n_theta, n_rho, 3)) from about
+    ``n_seeds`` points of the second tau section (rho_n between 0.2 and 0.8), forward."""
+    import pyvista as pv
+
+    grid = grid_to_vtk(points, {"U": velocity})
+    n_rho = points.shape[2]
+    rows = np.unique(np.clip(np.rint(np.linspace(0.2, 0.8, 3) * (n_rho - 1)).astype(int), 1, n_rho - 1))
+    cols = np.arange(0, points.shape[1], max(1, points.shape[1] * len(rows) // n_seeds))
+    seeds = pv.PolyData(points[min(1, len(points) - 1)][np.ix_(cols, rows)].reshape(-1, 3))
+    return grid.streamlines_from_source(
+        seeds, vectors="U", integration_direction="forward", max_length=4.0 * size, max_steps=4000
+    )
+
+
+def wall_values(values: np.ndarray) -> np.ndarray:
+    """A field's values on the wall: magnitude of a vector, the rho_n = 1 layer of a volume."""
+    return _scalar(values)[:, :, -1]
+
+
+def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
+    """Colour limits of every figure of one field: :func:`vcs.atlas.plots.robust_limits` of its
+    mean and each mode's mean +- 2 sigma (magnitudes; a wall field's values on the wall)."""
+    arrays = [panels["mean"], *(a for minus, plus, _ in panels["modes"] for a in (minus, plus))]
+    return robust_limits([wall_values(a) if on_wall else _scalar(a) for a in arrays])
+
+
+def field_cmap(name: str) -> str:
+    """Colour map of a flow field: diverging for pressure, viridis for the others."""
+    return "coolwarm" if field_quantity(name) == "p" else "viridis"
+
+
+def flow_mean_png(
+    name: str,
+    panels: dict[str, Any],
+    points: np.ndarray,
+    model: VesselModel,
+    frame: ViewFrame,
+    path: PathLike,
+    *,
+    on_wall: bool,
+    clim: tuple[float, float],
+) -> tuple[float, float]:
+    """Paper Fig. 8: the mean of flow field ``name`` on the mean shape.
+
+    A wall field (WSS, TAWSS, OSI, log10 RRT, ECAP): on the wall, anterior and posterior. p: on
+    the wall seen from behind (posterior), and in the lumen clipped along its sagittal plane. U:
+    |U| in the clipped lumen with streamlines from the inlet (thin black lines, where they run in
+    the removed half). ``panels`` is :func:`vcs.atlas.plots.flow_grid`'s entry of the field.
+    """
+    cmap, label, title = field_cmap(name), field_label(name), field_title(name)
+    look = coloured("v", clim, cmap)
+    mean = _scalar(panels["mean"])
+    if on_wall:
+        wall = wall_surface(points, {"v": mean[:, :, -1]})
+        shown = [Panel(f"{title} mean, {v}", v, [(wall, look)]) for v in ("anterior", "posterior")]
+    else:
+        cut = lumen_surface(points, {"v": mean}, facing_half(model, _theta(points), frame.normal))
+        shown = [Panel(f"{title} mean, sagittal cut", "sagittal", [(cut, look)])]
+        if field_quantity(name) == "p":
+            wall = wall_surface(points, {"v": mean[:, :, -1]})
+            shown.insert(0, Panel(f"{title} mean on the wall, posterior", "posterior", [(wall, look)]))
+        elif panels["mean"].ndim == 4:
+            try:
+                lines = streamlines(points, panels["mean"], frame.size)
+                shown[0].meshes.append((lines, {"color": "black", "line_width": 1.0, "opacity": 0.6}))
+            except Exception as exc:  # noqa: BLE001  # a figure without streamlines is still a figure
+                log.warning("no streamlines in %s: %s", Path(path).name, exc)
+    note = LEFT_OUT_NOTE if bool(np.isnan(mean).any()) else ""
+    render_panels(shown, frame, path, bar=ColourBar(label, clim, cmap, panel=len(shown) - 1), note=note)
+    return clim
+
+
+def _theta(points: np.ndarray) -> np.ndarray:
+    """The (uniform) theta samples of a measurement grid."""
+    n = points.shape[1]
+    return 2 * np.pi * np.arange(n) / n
+
+
+def flow_mode_png(
+    name: str,
+    panels: dict[str, Any],
+    mode: int,
+    points: np.ndarray,
+    model: VesselModel,
+    frame: ViewFrame,
+    path: PathLike,
+    *,
+    on_wall: bool,
+    clim: tuple[float, float],
+    share: float,
+) -> tuple[float, float]:
+    """Paper Fig. 9: flow mode ``mode`` (0-based) of field ``name`` as mean - 2 sigma, mean,
+    mean + 2 sigma, and its top-20 % region (red: the cells with the largest |mode|
+    contribution sigma_m |u_m|, :func:`vcs.atlas.pca.top_variation_mask`).
+
+    A wall field on the wall, one row anterior and one posterior; a volume field (U, p) in the
+    lumen clipped along its sagittal plane. ``share`` is the mode's explained variance (%).
+    """
+    cmap, label, title = field_cmap(name), field_label(name), field_title(name)
+    minus, plus, mask = panels["modes"][mode]
+    arrays = {"-": _scalar(minus), "0": _scalar(panels["mean"]), "+": _scalar(plus)}
+    if on_wall:
+        meshes = {k: wall_surface(points, {"v": v[:, :, -1]}) for k, v in arrays.items()}
+        meshes["m"] = wall_surface(points, {"mask": mask[:, :, -1].astype(float)})
+        views = ["anterior", "posterior"]
+    else:
+        keep = facing_half(model, _theta(points), frame.normal)
+        meshes = {k: lumen_surface(points, {"v": v}, keep) for k, v in arrays.items()}
+        meshes["m"] = lumen_surface(points, {"mask": mask.astype(float)}, keep)
+        views = ["sagittal"]
+    look = coloured("v", clim, cmap)
+    shown = []
+    for view in views:
+        shown += [
+            Panel(f"{title} mean - 2 sigma, {view}", view, [(meshes["-"], look)]),
+            Panel(f"{title} mean", view, [(meshes["0"], look)]),
+            Panel(f"{title} mean + 2 sigma", view, [(meshes["+"], look)]),
+            Panel(f"mode {mode + 1} ({share:.0f} %): top 20 % red", view, [(meshes["m"], mask_look())]),
+        ]
+    note = LEFT_OUT_NOTE if any(bool(np.isnan(v).any()) for v in arrays.values()) else ""
+    render_panels(shown, frame, path, n_cols=4, bar=ColourBar(label, clim, cmap, panel=1), note=note)
+    return clim
+
+
+def write_3d_figures(
+    atlas: Atlas, mean_model: VesselModel, png_dir: PathLike, *, info: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Write every 3-D figure of the module doc into ``png_dir``.
+
+    Parameters
+    ----------
+    atlas : Atlas
+    mean_model : VesselModel
+        The mean shape.
+    png_dir : str or Path
+        Existing directory of the PNGs.
+    info : dict, optional
+        :func:`vcs.atlas.plots.flow_grid`'s second result (computed when missing and the atlas
+        has flow fields).
+
+    Returns
+    -------
+    dict
+        ``files``: {figure name (the PNG's stem): path}; ``colour_limits``: {figure name: [lo, hi]};
+        ``seconds``: {figure name: render time}.
+    """
+    import time
+
+    from vcs.atlas.plots import flow_grid
+
+    out = Path(png_dir)
+    frame = ViewFrame.from_model(mean_model)
+    jobs: list[tuple[str, Any]] = [("shape_mean_3d", partial(shape_mean_png, mean_model, frame))]
+    template = atlas.aligned_models[0]
+    for k in range(atlas.shape.n_modes):
+        jobs.append((f"shape_mode{k + 1}_3d", partial(shape_mode_png, atlas.shape, template, k, frame)))
+    if atlas.flow and atlas.grid:
+        info = info if info is not None else flow_grid(atlas, mean_model)[1]
+        pts = info["points"]
+        for f, panels in info["panels"].items():
+            shape = atlas.field_shapes[f]
+            on_wall = len(shape) - (1 if is_vector_field(f) else 0) == 2
+            clim = field_limits(panels, on_wall=on_wall)
+            slug = field_slug(f)
+            mean_job = partial(flow_mean_png, f, panels, pts, mean_model, frame, on_wall=on_wall, clim=clim)
+            jobs.append((f"flow_{slug}_mean_3d", mean_job))
+            for k in range(len(panels["modes"])):
+                share = 100 * float(atlas.flow[f].explained_variance_ratio[k])
+                job = partial(
+                    flow_mode_png, f, panels, k, pts, mean_model, frame, share=share, on_wall=on_wall, clim=clim
+                )
+                jobs.append((f"flow_{slug}_mode{k + 1}_3d", job))
+    files, limits, seconds = {}, {}, {}
+    for key, draw in jobs:
+        t0 = time.perf_counter()
+        clim = draw(path=out / f"{key}.png")
+        seconds[key] = time.perf_counter() - t0
+        files[key] = str(out / f"{key}.png")
+        limits[key] = [float(clim[0]), float(clim[1])]
+    return {"files": files, "colour_limits": limits, "seconds": seconds}
