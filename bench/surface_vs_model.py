@@ -36,6 +36,8 @@ def _load(folder: Path) -> tuple[dict, dict] | None:
         return None
     with np.load(npz) as f:
         fields = {k: f[k] for k in ("tau", "WSS", "ostium") if k in f.files}
+    if "WSS" not in fields:  # a failed patient's placeholder (excluded, stage)
+        return None
     return json.loads(st.read_text()), fields
 
 
@@ -50,7 +52,7 @@ def pair_row(name: str, model: tuple[dict, dict], surface: tuple[dict, dict]) ->
     tau = fm["tau"]
     bands = {}
     for band, (lo, hi) in BANDS.items():
-        rows = (tau >= lo) & (tau <= hi)
+        rows = (tau >= lo) & ((tau < hi) if hi < 1.0 else (tau <= hi))  # half-open bands, the last closed
         k = keep & rows[:, None]
         a, b = float(wss_m[k].mean()), float(wss_s[k].mean())
         bands[band] = {"model_pa": a, "surface_pa": b, "change": (b - a) / a}
@@ -106,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     for n in names:
         m, s = _load(pts / f"{n}_model"), _load(pts / f"{n}_surface")
         if m is None or s is None:
-            print(f"{n}: a run is missing (status.json / fields.npz)", file=sys.stderr)
+            print(f"{n}: a run is missing or failed (status.json / fields.npz with WSS)", file=sys.stderr)
             continue
         rows.append(pair_row(n, m, s))
     print(f"# {platform.node()} ({os.cpu_count()} cores), {a.results}")

@@ -20,7 +20,8 @@ multi-solid STL for snappyHexMesh:
   written in metres.
 
 A rounded or remeshed end of a closed surface (a "closed end" of `vcs ends`) has no plane to put a
-patch on, and an end plane inside the vessel (a point given away from any opening) would need the
+patch on: it stays wall (a blind stub) unless it is the section's inlet or outlet; an end plane
+inside the vessel (a point given away from any opening) would need the
 surface clipped there: both are refused with one line saying what to do (cut the end flat, choose
 another end, or run that patient with ``cfd_geometry: model``).
 """
@@ -134,6 +135,18 @@ def _match(
     return best
 
 
+def _not_rounded(rounded: list[EndCandidate], centre: NDArray[np.floating], which: str, surf: Surface) -> None:
+    """One-line VCSInputError when the section's ``which`` end (fit centre, mm) is a rounded end."""
+    for c in rounded:
+        if np.linalg.norm(c.end.center - centre) <= max(MATCH_RADII * c.radius, MATCH_MIN_MM) * 2.0:
+            x = c.end.center / surf.scale_to_mm
+            raise VCSInputError(
+                f"cfd geometry surface: the section's {which} is a rounded (closed) end of the surface at "
+                f"({x[0]:.4g}, {x[1]:.4g}, {x[2]:.4g}) {surf.units}, with no flat cap to put the {which} patch on; "
+                "cut the end flat (or open it), or run this patient with cfd_geometry model"
+            )
+
+
 def _closed_check(vertices: NDArray[np.floating], faces: NDArray[np.integer], surf: Surface) -> None:
     """Refuse (one line) a closed lumen that is not watertight and manifold or crosses itself."""
     _, counts = edge_topology(faces)
@@ -181,14 +194,6 @@ def build_lumen(surf: Surface, inlet_center_mm: NDArray[np.floating], outlet_cen
     f = np.asarray(surf.faces)
     listing = list_ends(v, f, surf.cell_data, lumen_radius=surf.lumen_radius_mm)
     notes = list(surf.warnings) + list(listing.notes)
-    rounded = [c for c in listing.candidates if c.kind == "closed end"]
-    if rounded:
-        x = rounded[0].end.center / surf.scale_to_mm
-        raise VCSInputError(
-            f"cfd geometry surface: the surface has {len(rounded)} rounded (closed) end(s), e.g. at "
-            f"({x[0]:.4g}, {x[1]:.4g}, {x[2]:.4g}) {surf.units}, with no flat cap to put an inlet or outlet patch on; "
-            "cut the ends flat (or open them), or run this patient with cfd_geometry model"
-        )
     # each candidate with its patch: a cap's faces, or an open loop to close with a fan
     loop_of: dict[int, NDArray[np.integer]] = {}
     for loop in listing.loops:
@@ -196,7 +201,14 @@ def build_lumen(surf: Surface, inlet_center_mm: NDArray[np.floating], outlet_cen
         for i, cand in enumerate(listing.candidates):
             if cand.kind == "open loop" and np.allclose(cand.end.center, centre, atol=1e-9):
                 loop_of[i] = loop
-    cands = [(c, loop_of.get(i)) for i, c in enumerate(listing.candidates)]
+    # a rounded (closed) end has no plane for a patch: it stays wall (a blind stub), unless it is
+    # the section's inlet or outlet
+    rounded = [c for c in listing.candidates if c.kind == "closed end"]
+    for which, centre in (("inlet", inlet_center_mm), ("outlet", outlet_center_mm)):
+        _not_rounded(rounded, np.asarray(centre, float), which, surf)
+    if rounded:
+        notes.append(f"{len(rounded)} rounded (closed) end(s) that are not the section's ends kept as wall")
+    cands = [(c, loop_of.get(i)) for i, c in enumerate(listing.candidates) if c.kind != "closed end"]
     i_in = _match(cands, np.asarray(inlet_center_mm, float), "inlet", surf.units)
     i_out = _match(cands, np.asarray(outlet_center_mm, float), "outlet", surf.units)
     if i_in == i_out:

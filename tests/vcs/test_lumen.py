@@ -59,6 +59,11 @@ def test_the_ends_follow_the_fit_not_the_size():
     assert lumen.ends[0].name == "inlet"
 
 
+def test_inlet_and_outlet_at_the_same_end_are_refused():
+    with pytest.raises(VCSInputError, match="the same end of the surface"):
+        build_lumen(_straight_tube(), np.zeros(3), np.array([0.5, 0.0, 0.0]))
+
+
 def test_an_end_plane_inside_the_vessel_is_refused_in_one_line():
     with pytest.raises(VCSInputError, match=r"section's outlet .* not an opening or a flat cap") as exc:
         build_lumen(_straight_tube(), np.zeros(3), np.array([0.0, 0.0, 30.0]))
@@ -117,7 +122,7 @@ def test_bifurcation_volume_matches_vtk(shared_data):
 def test_rounded_ends_are_refused_with_what_to_do(shared_data, tmp_path):
     mesh = shared_data / "sphinxsys_tah_aorta_capped_coarse.stl"
     c_in, c_out = np.array([-27.31, -203.48, -1173.99]), np.array([4.00, -120.90, -1246.75])
-    with pytest.raises(VCSInputError, match=r"2 rounded \(closed\) end\(s\).*cut the ends flat"):
+    with pytest.raises(VCSInputError, match=r"section's inlet is a rounded \(closed\) end.*cut the end flat"):
         build_lumen(read_lumen_surface(mesh, "mm", c_in, c_out), c_in, c_out)
 
 

@@ -85,6 +85,25 @@ def test_one_patients_own_cfd_values_rerun_only_that_patients_cfd(cohort):
     assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"], ["P3"]) | COHORT
 
 
+def test_one_patients_geometry_and_outlets_rerun_only_that_patients_cfd(cohort):
+    """cfd_geometry surface in one row: that patient's lumen (not its fit, nobody's wall) and its
+    CFD; then its outlets / Windkessel totals: its CFD only."""
+    cohort.fake_finished_run()
+    rows = [
+        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
+        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
+        {"id": "P3", "mesh": "meshes/p3.stl"},
+    ]
+    rows[1]["cfd_geometry"] = "surface"
+    cohort.write_sheet(rows)
+    cfd = ["openfoam_case", "openfoam_solve", "fields_sample"]
+    assert cohort.planned_jobs() == chain(["vcs_lumen", *cfd], ["P2"]) | COHORT
+    cohort.fake_finished_run()
+    rows[2] |= {"outlets": "rcr", "rcr_compliance_ml_mmhg": "1.5"}
+    cohort.write_sheet(rows)
+    assert cohort.planned_jobs() == chain(cfd, ["P3"]) | COHORT
+
+
 def test_knots_rerun_everything_downstream_of_the_fit(cohort):
     cohort.fake_finished_run()
     cohort.update_config("vcs", "K", 15)
@@ -355,6 +374,14 @@ def test_half_given_ends_fail_with_one_line(cohort):
         (
             {"flow_rate_l_min": "4", "inlet_velocity_m_s": "1.2", "valve_area_cm2": "1"},
             "give the inflow either as flow_rate_l_min or as inlet_velocity_m_s + valve_area_cm2, not both",
+        ),
+        ({"cfd_geometry": "lumen"}, "cfd_geometry"),
+        ({"outlets": "windkessel"}, "outlets"),
+        ({"outlets": "rcr", "rcr_resistance_mmhg_s_ml": "-1"}, "rcr_resistance_mmhg_s_ml '-1' is out of range"),
+        ({"outlets": "rcr", "rcr_compliance_ml_mmhg": "nan"}, "rcr_compliance_ml_mmhg 'nan' is out of range"),
+        (
+            {"outlets": "murray", "rcr_resistance_mmhg_s_ml": "1"},
+            "rcr_resistance_mmhg_s_ml is given but this patient's outlets are murray",
         ),
     ],
 )

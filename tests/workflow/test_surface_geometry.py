@@ -100,7 +100,7 @@ def test_a_surface_that_cannot_be_a_lumen_is_a_patient_failure(tmp_path, workdir
     wd.snakemake("--cores", "1", "results/patients/tah/status.json", timeout=600)
     st = json.loads((tmp_path / "results" / "patients" / "tah" / "status.json").read_text())
     assert st["failed"] is True and st["stage"] == "lumen"
-    assert "rounded (closed) end(s)" in st["reason"] and "cfd_geometry model" in st["reason"]
+    assert "inlet is a rounded (closed) end" in st["reason"] and "cfd_geometry model" in st["reason"]
     assert "\n" not in st["reason"] and "Traceback" not in st["reason"]
     assert status_exclusion(st) == st["reason"]
     assert not (tmp_path / "results" / "patients" / "tah" / "case" / "constant" / "polyMesh").exists()

@@ -158,8 +158,9 @@ def split_rcr(
     (Comput Methods Appl Mech Eng 195:3776-3796) and 2010 (Comput Methods Biomech Biomed Eng
     13:625-640) and Xiao et al. 2014 (Int J Numer Method Biomed Eng 30:204-231). The default
     beta = 0.09 is a modelling convention (R_p about a tenth of the outlet's resistance), not a value
-    measured in or taken from a table of these papers: give the patient's own value, or per-outlet
-    parameters, when they are known.
+    measured in or taken from a table of these papers: give the patient's own
+    ``cfd.outlets.rcr.proximal_fraction`` when it is known (per-outlet parameters are not accepted:
+    every outlet's RCR comes from this split).
 
     Parameters
     ----------

@@ -258,6 +258,13 @@ def load_patients(sheet):
         for column in ("mesh", "inlet_cap", "outlet_cap", "inflow_waveform"):
             if column in record:
                 _check_file(record[column], sheet, n, pid, column)
+        given = [c for c in PATIENT_RCR_COLUMNS if c in record]
+        kind = record.get("outlets") or config["cfd"].get("outlets", {}).get("type", "free")
+        if given and kind != "rcr":
+            fail(
+                f"patients sheet '{sheet}' line {n} (id {pid}): {given[0]} is given but this patient's outlets "
+                f"are {kind}; set its outlets column to rcr (or leave {given[0]} empty)"
+            )
         if "inflow_waveform" in record:
             if "flow_rate_l_min" in record or "inlet_velocity_m_s" in record:
                 fail(

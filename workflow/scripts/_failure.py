@@ -14,7 +14,7 @@ fields.npz), so the chain ends as usual and the atlas lists the patient under
 a rerun after fixing the input reruns the chain (Snakemake sees new inputs) and nothing that looks
 like a result is left behind.
 
-Command line (the tail of the shell rules vcs_fit and vcs_wall, see workflow/rules/geometry.smk):
+Command line (the tail of the shell rules vcs_fit, vcs_wall and vcs_lumen, see workflow/rules/geometry.smk):
 
     python _failure.py propagate --patient ID --log LOG --upstream FILE... -- OUTPUT...
         exit 0 after writing the first upstream failure record found into every OUTPUT

@@ -1,6 +1,6 @@
 """Rule openfoam_case: render the OpenFOAM case of one patient (vcs.cfd.render_case).
 
-A wall STL that is a failure record of an earlier stage (workflow/scripts/_failure.py), or a case
+A wall or lumen STL that is a failure record of an earlier stage (workflow/scripts/_failure.py), or a case
 that cannot be set up, is written to SETUP_FAILED.json (stage, reason, log) for openfoam_solve:
 a per-patient failure, not a job failure.
 """
@@ -21,7 +21,7 @@ def main(smk):
     from vcs.cfd import render_case
 
     upstream = _failure.read_record(smk.input.stl)
-    if upstream is not None:  # the fit or the wall failed: pass it on
+    if upstream is not None:  # the fit, wall or lumen failed: pass it on
         log.warning(
             "%s: not set up, failed at the %s stage: %s", smk.wildcards.id, upstream["stage"], upstream["reason"]
         )
