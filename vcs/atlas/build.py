@@ -97,10 +97,11 @@ def build_atlas(
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
         summary["colour_limits"] = {
             "percentiles": list(COLOUR_PERCENTILES),
-            "shared_by": "the mean - 2 sigma, mean and mean + 2 sigma panels of each flow figure "
-            "(of a wall field: its values on the wall)",
+            "shared_by": "every figure of a flow field, 3-D and flat: its mean and each mode's "
+            "mean +- 2 sigma values (of a wall field: its values on the wall)",
             "limits": written["colour_limits"],
         }
+        summary["figure_seconds"] = written["figure_seconds"]
     (out / "atlas.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
     log.info("atlas of %d patients (%d excluded) written to %s", len(atlas.patients), len(atlas.excluded), out)
     return atlas

@@ -26,12 +26,16 @@ and its ``png_dir`` (PNG, default ``out_dir/figures``; each figure is written on
   :data:`vcs.atlas.cohort.NON_FINITE_RULE`) are NaN there, and grey in the PNGs (:data:`NAN_COLOUR`,
   with a note saying so);
 * ``flow_{field}_mode{k}.png`` (field slug, e.g. ``flow_phase_peak_systole_U_mode1.png``):
-  theta-clipped lumen views (paper Figs. 8-9) of U, p, WSS and the phase fields, and (tau, theta)
-  maps of the wall markers (:func:`wall_map_png`, e.g. ``flow_TAWSS_mode1.png``): mean - 2 sigma,
-  mean, mean + 2 sigma, and the top-20 % region. The three field panels share one colour scale,
-  from the 2nd to the 98th percentile of their values (:func:`robust_limits`: one outlying
-  patient, whose mode sends a few cells far off, does not darken every panel); values beyond are
-  drawn at the ends of the scale.
+  theta-clipped lumen views of U, p and the phase U, p, and (tau, theta) maps of the wall fields
+  (WSS magnitude, the wall markers, the phase WSS: :func:`wall_map_png`, e.g.
+  ``flow_TAWSS_mode1.png``): mean - 2 sigma, mean, mean + 2 sigma, and the top-20 % region. Every
+  figure of a field (these and its 3-D ones) has one colour scale, from the 2nd to the 98th
+  percentile of its mean's and modes' +- 2 sigma values (:func:`field_limits`,
+  :func:`robust_limits`: one outlying patient, whose mode sends a few cells far off, does not
+  darken every panel); values beyond are drawn at the ends of the scale;
+* the 3-D figures of :mod:`vcs.atlas.plots3d` (``*_3d.png``: the mean shape, the shape modes, each
+  flow field's mean and modes on the wall or in the clipped lumen, seen from the mean shape's own
+  frame), unless no off-screen render window can be opened.
 """
 
 from __future__ import annotations
@@ -850,12 +854,27 @@ def wall_map_png(
     plt.close(fig)
 
 
+def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
+    """Colour limits shared by every figure of one flow field (3-D and flat, its mean and each
+    mode): :func:`robust_limits` of its mean and each mode's mean +- 2 sigma (magnitudes; of a
+    wall field, its values on the wall). ``panels`` is a field's entry of :func:`flow_grid`'s
+    ``panels``."""
+    arrays = [panels["mean"], *(a for minus, plus, _ in panels["modes"] for a in (minus, plus))]
+    return robust_limits([_scalar(a)[:, :, -1] if on_wall else _scalar(a) for a in arrays])
+
+
 def write_flow_files(
-    atlas: Atlas, mean_model: VesselModel, out_dir: PathLike, *, png_dir: PathLike | None = None
+    atlas: Atlas,
+    mean_model: VesselModel,
+    out_dir: PathLike,
+    *,
+    png_dir: PathLike | None = None,
+    grid: tuple[pyvista.UnstructuredGrid, dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """flow_mean.vtu (:func:`flow_grid`) and the PNG of every field and mode: a clipped lumen view
-    (:func:`clipped_view_png`), or for a scalar wall map (the wall markers) a (tau, theta) map
-    (:func:`wall_map_png`).
+    """flow_mean.vtu (:func:`flow_grid`) and the flat PNG of every field and mode: a clipped lumen
+    view of a volume field (:func:`clipped_view_png`), a (tau, theta) map of a wall field (WSS
+    magnitude, the wall markers: :func:`wall_map_png`). Every figure of a field has the field's
+    colour limits (:func:`field_limits`).
 
     Parameters
     ----------
@@ -866,6 +885,8 @@ def write_flow_files(
         Existing output directory (the VTU).
     png_dir : str or Path, optional
         Existing directory of the PNGs (default ``out_dir``).
+    grid : tuple, optional
+        :func:`flow_grid` of the atlas and mean shape (computed when missing).
 
     Returns
     -------
@@ -877,9 +898,9 @@ def write_flow_files(
     """
     out = Path(out_dir)
     pngs = Path(png_dir) if png_dir is not None else out
-    grid, info = flow_grid(atlas, mean_model)
+    vtu, info = grid if grid is not None else flow_grid(atlas, mean_model)
     files: dict[str, Any] = {"flow_mean": "flow_mean.vtu"}
-    grid.save(str(out / files["flow_mean"]))
+    vtu.save(str(out / files["flow_mean"]))
     theta = atlas.grid["theta"]
     # look at the cut planes from the removed side (theta = 3 pi / 2 at mid tau)
     _, v1, v2 = mean_model.vcs.frame(np.array([0.5]))
@@ -887,7 +908,7 @@ def write_flow_files(
     renderers = set()
     limits: dict[str, list[float]] = {}
     lo_pc, hi_pc = COLOUR_PERCENTILES
-    note = f"colour scale: {lo_pc:g}-{hi_pc:g} % of the 3 panels' values"
+    note = f"colour scale: {lo_pc:g}-{hi_pc:g} % of the field's mean and modes +- 2 sigma"
     tau = atlas.grid["tau"]
     for f, d in info["panels"].items():
         cmap = "coolwarm" if field_quantity(f) == "p" else "viridis"
@@ -895,6 +916,7 @@ def write_flow_files(
         mask_title = "" if field_phase(f) else title  # a phase's name makes the title overflow the panel
         shape = atlas.field_shapes[f]
         on_wall = len(shape) - (1 if is_vector_field(f) else 0) == 2  # (n_tau, n_theta[, 3])
+        clim = field_limits(d, on_wall=on_wall)
         for k, (minus, plus, mask) in enumerate(d["modes"]):
             panels = [
                 (f"{title} mean - 2 sigma (mode {k + 1})", _scalar(minus), cmap),
@@ -903,11 +925,10 @@ def write_flow_files(
                 (f"{mask_title} mode {k + 1}: top 20 % variation (red)".lstrip(), mask.astype(float), "Reds"),
             ]
             values = [v[:, :, -1] if on_wall else v for _, v, _ in panels[:3]]  # inside a wall field: zeros
-            clim = robust_limits(values)
             left_out = any(bool(np.isnan(v).any()) for v in values)
             key = f"flow_{field_slug(f)}_mode{k + 1}"
             png = pngs / f"{key}.png"
-            if len(shape) == 2:  # a scalar wall map (the wall markers): drawn over (tau, theta)
+            if on_wall:  # a wall field (WSS, the wall markers): drawn over (tau, theta)
                 maps = [(t, v[:, :, -1], c) for t, v, c in panels]
                 wall_map_png(tau, theta, maps, png, label=label, clim=clim, note=note)
             else:
@@ -940,7 +961,9 @@ def write_atlas_figures(atlas: Atlas, out_dir: PathLike, *, png_dir: PathLike | 
     dict
         ``files``: {what: file name relative to ``out_dir``}; ``renderer``: list of the 3-D
         renderer(s) used (``"pyvista"``, ``"matplotlib"``), empty without flow figures;
-        ``colour_limits``: {flow figure: [lo, hi]} (see :func:`write_flow_files`).
+        ``colour_limits``: {flow figure: [lo, hi]} (see :func:`write_flow_files`);
+        ``figure_seconds``: {3-D figure: render time (s)} of :func:`vcs.atlas.plots3d.write_3d_figures`
+        (empty when no off-screen render window could be opened: the 3-D figures are then missing).
     """
     from vcs.vessel import VesselModel
 
@@ -953,9 +976,27 @@ def write_atlas_figures(atlas: Atlas, out_dir: PathLike, *, png_dir: PathLike | 
     )
     explained_variance_png(atlas, pngs / "explained_variance.png")
     files["explained_variance"] = _relative(pngs / "explained_variance.png", out)
-    if atlas.flow and atlas.grid:
-        mean_model = VesselModel.from_feature_vector(atlas.shape.mean, template)
-        files.update(write_flow_files(atlas, mean_model, out, png_dir=pngs))
+    mean_model = VesselModel.from_feature_vector(atlas.shape.mean, template)
+    grid = flow_grid(atlas, mean_model) if atlas.flow and atlas.grid else None
+    if grid is not None:
+        files.update(write_flow_files(atlas, mean_model, out, png_dir=pngs, grid=grid))
     renderer = files.pop("renderer", [])
     limits = files.pop("colour_limits", {})
-    return {"files": files, "renderer": renderer, "colour_limits": limits}
+    seconds = _write_3d(atlas, mean_model, pngs, out, files, grid=grid)
+    return {"files": files, "renderer": renderer, "colour_limits": limits, "figure_seconds": seconds}
+
+
+def _write_3d(
+    atlas: Atlas, mean_model: VesselModel, pngs: Path, out: Path, files: dict[str, Any], *, grid: Any
+) -> dict[str, float]:
+    """The 3-D figures (:func:`vcs.atlas.plots3d.write_3d_figures`), listed in ``files``; their
+    render seconds. Without an off-screen render window: none, and a warning."""
+    from vcs.atlas.plots3d import write_3d_figures
+
+    try:
+        written = write_3d_figures(atlas, mean_model, pngs, info=None if grid is None else grid[1])
+    except Exception as exc:  # noqa: BLE001  # no off-screen render window: the flat figures remain
+        log.warning("no 3-D atlas figures: pyvista off-screen rendering failed (%s)", exc)
+        return {}
+    files.update({k: _relative(Path(v), out) for k, v in written["files"].items()})
+    return {k: round(v, 3) for k, v in written["seconds"].items()}

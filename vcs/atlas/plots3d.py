@@ -16,7 +16,9 @@ Figures (PNG, written by :func:`write_3d_figures`; ``{field}`` a :func:`vcs.atla
   anterior and posterior; p on the wall from behind and in the clipped lumen; |U| in the clipped
   lumen with streamlines;
 * ``flow_{field}_mode{k}_3d.png``: mean - 2 sigma, mean, mean + 2 sigma and the top-20 % region of
-  flow mode k, on the wall (anterior and posterior rows) or in the clipped lumen.
+  flow mode k, on the wall (anterior and posterior rows) or in the clipped lumen; not of the
+  phase fields of a pulsatile cohort (their modes have the flat figures of :mod:`vcs.atlas.plots`
+  only: 27 renders fewer for 3 phases and 3 modes).
 
 The clipped lumen is the measurement grid with the half of its theta range that faces the camera
 removed (:func:`facing_half`), so the cut shows the field inside. All the figures of one field
@@ -34,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from vcs.atlas.pca import field_quantity, field_slug, is_vector_field, mode_deformation
+from vcs.atlas.pca import field_phase, field_quantity, field_slug, is_vector_field, mode_deformation
 from vcs.atlas.plots import (
     BAR_HEIGHT,
     BAR_Y,
@@ -47,6 +49,7 @@ from vcs.atlas.plots import (
     _scalar,
     colour_bar_labels,
     field_label,
+    field_limits,
     field_title,
     robust_limits,
 )
@@ -380,18 +383,6 @@ def streamlines(points: np.ndarray, velocity: np.ndarray, size: float, *, n_seed
     )
 
 
-def wall_values(values: np.ndarray) -> np.ndarray:
-    """A field's values on the wall: magnitude of a vector, the rho_n = 1 layer of a volume."""
-    return _scalar(values)[:, :, -1]
-
-
-def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
-    """Colour limits of every figure of one field: :func:`vcs.atlas.plots.robust_limits` of its
-    mean and each mode's mean +- 2 sigma (magnitudes; a wall field's values on the wall)."""
-    arrays = [panels["mean"], *(a for minus, plus, _ in panels["modes"] for a in (minus, plus))]
-    return robust_limits([wall_values(a) if on_wall else _scalar(a) for a in arrays])
-
-
 def field_cmap(name: str) -> str:
     """Colour map of a flow field: diverging for pressure, viridis for the others."""
     return "coolwarm" if field_quantity(name) == "p" else "viridis"
@@ -532,7 +523,7 @@ def write_3d_figures(
             slug = field_slug(f)
             mean_job = partial(flow_mean_png, f, panels, pts, mean_model, frame, on_wall=on_wall, clim=clim)
             jobs.append((f"flow_{slug}_mean_3d", mean_job))
-            for k in range(len(panels["modes"])):
+            for k in range(0 if field_phase(f) else len(panels["modes"])):  # a phase's modes: flat maps only
                 share = 100 * float(atlas.flow[f].explained_variance_ratio[k])
                 job = partial(
                     flow_mode_png, f, panels, k, pts, mean_model, frame, share=share, on_wall=on_wall, clim=clim
