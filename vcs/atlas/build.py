@@ -97,8 +97,9 @@ def build_atlas(
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
         summary["colour_limits"] = {
             "percentiles": list(COLOUR_PERCENTILES),
-            "shared_by": "every figure of a flow field, 3-D and flat: its mean and each mode's "
-            "mean +- 2 sigma values (of a wall field: its values on the wall)",
+            "shared_by": "every figure of a flow field, 3-D and flat: the widest of the percentile "
+            "ranges of its figures' values (the mean's; each mode's mean - 2 sigma, mean, mean + 2 "
+            "sigma; of a wall field: its values on the wall)",
             "limits": written["colour_limits"],
         }
         summary["figure_seconds"] = written["figure_seconds"]

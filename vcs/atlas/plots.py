@@ -29,10 +29,10 @@ and its ``png_dir`` (PNG, default ``out_dir/figures``; each figure is written on
   theta-clipped lumen views of U, p and the phase U, p, and (tau, theta) maps of the wall fields
   (WSS magnitude, the wall markers, the phase WSS: :func:`wall_map_png`, e.g.
   ``flow_TAWSS_mode1.png``): mean - 2 sigma, mean, mean + 2 sigma, and the top-20 % region. Every
-  figure of a field (these and its 3-D ones) has one colour scale, from the 2nd to the 98th
-  percentile of its mean's and modes' +- 2 sigma values (:func:`field_limits`,
-  :func:`robust_limits`: one outlying patient, whose mode sends a few cells far off, does not
-  darken every panel); values beyond are drawn at the ends of the scale;
+  figure of a field (these and its 3-D ones) has one colour scale: the widest of its figures'
+  2nd-98th percentiles of their values (:func:`field_limits`, :func:`robust_limits`: one
+  outlying patient, whose mode sends a few cells far off, does not darken every panel); values
+  beyond are drawn at the ends of the scale;
 * the 3-D figures of :mod:`vcs.atlas.plots3d` (``*_3d.png``: the mean shape, the shape modes, each
   flow field's mean and modes on the wall or in the clipped lumen, seen from the mean shape's own
   frame), unless no off-screen render window can be opened.
@@ -856,11 +856,19 @@ def wall_map_png(
 
 def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
     """Colour limits shared by every figure of one flow field (3-D and flat, its mean and each
-    mode): :func:`robust_limits` of its mean and each mode's mean +- 2 sigma (magnitudes; of a
-    wall field, its values on the wall). ``panels`` is a field's entry of :func:`flow_grid`'s
+    mode): the widest of the figures' own :func:`robust_limits` (2nd-98th percentile of a mode's
+    mean - 2 sigma, mean and mean + 2 sigma values; magnitudes; of a wall field, its values on the
+    wall). Each figure then has at most ~2 % of its values beyond either end, and the figures of a
+    field can be compared colour for colour. ``panels`` is a field's entry of :func:`flow_grid`'s
     ``panels``."""
-    arrays = [panels["mean"], *(a for minus, plus, _ in panels["modes"] for a in (minus, plus))]
-    return robust_limits([_scalar(a)[:, :, -1] if on_wall else _scalar(a) for a in arrays])
+
+    def shown(a: np.ndarray) -> np.ndarray:
+        return _scalar(a)[:, :, -1] if on_wall else _scalar(a)
+
+    mean = shown(panels["mean"])
+    limits = [robust_limits([mean])]
+    limits += [robust_limits([shown(minus), mean, shown(plus)]) for minus, plus, _ in panels["modes"]]
+    return min(lo for lo, _ in limits), max(hi for _, hi in limits)
 
 
 def write_flow_files(
@@ -908,7 +916,7 @@ def write_flow_files(
     renderers = set()
     limits: dict[str, list[float]] = {}
     lo_pc, hi_pc = COLOUR_PERCENTILES
-    note = f"colour scale: {lo_pc:g}-{hi_pc:g} % of the field's mean and modes +- 2 sigma"
+    note = f"colour scale: {lo_pc:g}-{hi_pc:g} % of the field's figures' values, widest"
     tau = atlas.grid["tau"]
     for f, d in info["panels"].items():
         cmap = "coolwarm" if field_quantity(f) == "p" else "viridis"

@@ -22,8 +22,8 @@ Figures (PNG, written by :func:`write_3d_figures`; ``{field}`` a :func:`vcs.atla
 
 The clipped lumen is the measurement grid with the half of its theta range that faces the camera
 removed (:func:`facing_half`), so the cut shows the field inside. All the figures of one field
-share its colour limits (:func:`field_limits`: 2nd-98th percentile of the mean and every mode's
-+-2 sigma values); NaN (wall cells left out of a PCA, e.g. at an ostium) is drawn grey.
+share its colour limits (:func:`vcs.atlas.plots.field_limits`: the widest of the figures' 2nd-98th
+percentiles); NaN (wall cells left out of a PCA, e.g. at an ostium) is drawn grey.
 """
 
 from __future__ import annotations
@@ -308,13 +308,13 @@ def shape_mode_png(pca: PCA, template: VesselModel, mode: int, frame: ViewFrame,
     """Paper Fig. 7: shape mode ``mode`` (0-based) as its mean - 2 sigma and mean + 2 sigma walls.
 
     Columns: the -2 sigma wall and the +2 sigma wall coloured by the radius change
-    delta rho_w = rho_w(mode shape) - rho_w(mean) (mm; symmetric limits shared by both walls: the
-    98th percentile of |delta rho_w|), each with the mean wall as a translucent grey ghost; then
+    delta rho_w = rho_w(mode shape) - rho_w(mean) (mm; symmetric limits shared by both walls:
+    1.05 max |delta rho_w|), each with the mean wall as a translucent grey ghost; then
     the centerlines (mean black, -2 sigma blue, +2 sigma red) inside the ghost. Rows: sagittal,
     coronal. Returns the colour limits.
     """
     d = {s: mode_deformation(pca, template, mode, n_sigma=s) for s in (-2.0, 2.0)}
-    lim = float(np.percentile(np.abs(np.concatenate([d[s]["radius_change"].ravel() for s in d])), 98.0))
+    lim = 1.05 * float(max(np.abs(d[s]["radius_change"]).max() for s in d))  # smooth: no outliers to cut
     clim = (-max(lim, 1e-6), max(lim, 1e-6))
     mean = d[2.0]["mean_model"]
     ghost = (wall_polydata(mean, n=(51, 24)), ghost_look())
