@@ -142,8 +142,8 @@ def test_two_views_of_the_same_data_differ(figures):
     images = figures[0]
     for name, cols, rows, a, b in (
         ("shape_mean_3d", 2, 1, 0, 1),  # sagittal, coronal
-        ("flow_WSS_mean_3d", 2, 1, 0, 1),  # anterior, posterior
-        ("flow_WSS_mode1_3d", 4, 2, 1, 5),  # the mean, anterior and posterior
+        ("flow_WSS_mean_3d", 2, 1, 0, 1),  # front, back
+        ("flow_WSS_mode1_3d", 4, 2, 1, 5),  # the mean, front and back
         ("shape_mode1_3d", 3, 2, 0, 1),  # -2 sigma and +2 sigma walls
     ):
         pa, pb = panel(images[name], a, cols, rows), panel(images[name], b, cols, rows)

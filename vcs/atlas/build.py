@@ -91,7 +91,7 @@ def build_atlas(
         arrays["phase_names"] = np.array(atlas.phase_names)
     np.savez_compressed(out / "atlas.npz", **arrays)
     if figures:
-        from vcs.atlas.plots import COLOUR_PERCENTILES, write_atlas_figures
+        from vcs.atlas.plots import COLOUR_PERCENTILES, FIELD_LIMIT_PAD, write_atlas_figures
 
         written = write_atlas_figures(atlas, out, png_dir=figure_dir)
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
@@ -99,7 +99,7 @@ def build_atlas(
             "percentiles": list(COLOUR_PERCENTILES),
             "shared_by": "every figure of a flow field, 3-D and flat: the widest of the percentile "
             "ranges of its figures' values (the mean's; each mode's mean - 2 sigma, mean, mean + 2 "
-            "sigma; of a wall field: its values on the wall)",
+            f"sigma; of a wall field: its values on the wall), widened by {100 * FIELD_LIMIT_PAD:g} % at either end",
             "limits": written["colour_limits"],
         }
         summary["figure_seconds"] = written["figure_seconds"]

@@ -75,6 +75,8 @@ log = logging.getLogger(__name__)
 
 #: Percentiles of a flow figure's values that set its (shared) colour limits.
 COLOUR_PERCENTILES = (2.0, 98.0)
+#: Margin added to a flow field's colour range at either end (fraction of its width): :func:`field_limits`.
+FIELD_LIMIT_PAD = 0.05
 #: Width of a label character relative to the font size (digits, '-', '.' of VTK's Arial: ~0.55).
 _CHAR_WIDTH = 0.6
 PANEL_PX = (420, 520)  # width, height of one panel of a clipped view
@@ -858,8 +860,9 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
     """Colour limits shared by every figure of one flow field (3-D and flat, its mean and each
     mode): the widest of the figures' own :func:`robust_limits` (2nd-98th percentile of a mode's
     mean - 2 sigma, mean and mean + 2 sigma values; magnitudes; of a wall field, its values on the
-    wall). Each figure then has at most ~2 % of its values beyond either end, and the figures of a
-    field can be compared colour for colour. ``panels`` is a field's entry of :func:`flow_grid`'s
+    wall), widened by :data:`FIELD_LIMIT_PAD` of its width at either end. Each figure then has
+    less than 2 % of its values beyond either end, and the figures of a field can be compared
+    colour for colour. ``panels`` is a field's entry of :func:`flow_grid`'s
     ``panels``."""
 
     def shown(a: np.ndarray) -> np.ndarray:
@@ -868,7 +871,9 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
     mean = shown(panels["mean"])
     limits = [robust_limits([mean])]
     limits += [robust_limits([shown(minus), mean, shown(plus)]) for minus, plus, _ in panels["modes"]]
-    return min(lo for lo, _ in limits), max(hi for _, hi in limits)
+    lo, hi = min(lo for lo, _ in limits), max(hi for _, hi in limits)
+    pad = FIELD_LIMIT_PAD * (hi - lo)  # the extreme cells, often facing a 3-D view, not at the end colours
+    return lo - pad, hi + pad
 
 
 def write_flow_files(

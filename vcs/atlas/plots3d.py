@@ -4,7 +4,9 @@ Every view is set in the mean shape's own frame (:class:`ViewFrame`): the plane 
 the mean centerline, its long axis up (the outlet at the bottom), its in-plane cross axis
 "anterior" (the inlet's side: the ascending aorta lies in front of the descending one), its
 normal the sagittal direction. Views: ``sagittal`` (from +normal: the whole centerline in the
-picture plane), ``coronal`` and ``anterior`` (from +anterior), ``posterior`` (from -anterior).
+picture plane), ``coronal`` (from +anterior), and for the wall fields ``front`` (+normal) and
+``back`` (-normal): the two sides of the mean plane, which together show the whole wall (seen
+from +-anterior, an arch's ascending part would hide its descending part).
 
 Figures (PNG, written by :func:`write_3d_figures`; ``{field}`` a :func:`vcs.atlas.pca.field_slug`):
 
@@ -13,10 +15,11 @@ Figures (PNG, written by :func:`write_3d_figures`; ``{field}`` a :func:`vcs.atla
   by the radius change against the mean (the mean as a grey ghost), and the three centerlines;
   one row per view (sagittal, coronal);
 * ``flow_{field}_mean_3d.png``: a wall field (WSS, TAWSS, OSI, log10 RRT, ECAP) on the wall,
-  anterior and posterior; p on the wall from behind and in the clipped lumen; |U| in the clipped
+  front and back (the two sides of the mean plane); p on the wall from the back and in the
+  clipped lumen; |U| in the clipped
   lumen with streamlines;
 * ``flow_{field}_mode{k}_3d.png``: mean - 2 sigma, mean, mean + 2 sigma and the top-20 % region of
-  flow mode k, on the wall (anterior and posterior rows) or in the clipped lumen; not of the
+  flow mode k, on the wall (front and back rows) or in the clipped lumen; not of the
   phase fields of a pulsatile cohort (their modes have the flat figures of :mod:`vcs.atlas.plots`
   only: 27 renders fewer for 3 phases and 3 modes).
 
@@ -117,12 +120,7 @@ class ViewFrame:
 
     def direction(self, view: str) -> np.ndarray:
         """Unit vector from the centre towards the camera of ``view``."""
-        return {
-            "sagittal": self.normal,
-            "coronal": self.anterior,
-            "anterior": self.anterior,
-            "posterior": -self.anterior,
-        }[view]
+        return {"sagittal": self.normal, "coronal": self.anterior, "front": self.normal, "back": -self.normal}[view]
 
     def set_camera(self, camera: Any, view: str, *, aspect: float) -> None:
         """Point a pyvista camera at the mean wall from ``view`` (parallel projection): the same
@@ -401,8 +399,8 @@ def flow_mean_png(
 ) -> tuple[float, float]:
     """Paper Fig. 8: the mean of flow field ``name`` on the mean shape.
 
-    A wall field (WSS, TAWSS, OSI, log10 RRT, ECAP): on the wall, anterior and posterior. p: on
-    the wall seen from behind (posterior), and in the lumen clipped along its sagittal plane. U:
+    A wall field (WSS, TAWSS, OSI, log10 RRT, ECAP): on the wall, front and back. p: on
+    the wall seen from the back, and in the lumen clipped along its sagittal plane. U:
     |U| in the clipped lumen with streamlines from the inlet (thin black lines, where they run in
     the removed half). ``panels`` is :func:`vcs.atlas.plots.flow_grid`'s entry of the field.
     """
@@ -411,13 +409,13 @@ def flow_mean_png(
     mean = _scalar(panels["mean"])
     if on_wall:
         wall = wall_surface(points, {"v": mean[:, :, -1]})
-        shown = [Panel(f"{title} mean, {v}", v, [(wall, look)]) for v in ("anterior", "posterior")]
+        shown = [Panel(f"{title} mean, {v}", v, [(wall, look)]) for v in ("front", "back")]
     else:
         cut = lumen_surface(points, {"v": mean}, facing_half(model, _theta(points), frame.normal))
         shown = [Panel(f"{title} mean, sagittal cut", "sagittal", [(cut, look)])]
         if field_quantity(name) == "p":
             wall = wall_surface(points, {"v": mean[:, :, -1]})
-            shown.insert(0, Panel(f"{title} mean on the wall, posterior", "posterior", [(wall, look)]))
+            shown.insert(0, Panel(f"{title} mean on the wall, back", "back", [(wall, look)]))
         elif panels["mean"].ndim == 4:
             try:
                 lines = streamlines(points, panels["mean"], frame.size)
@@ -452,7 +450,7 @@ def flow_mode_png(
     mean + 2 sigma, and its top-20 % region (red: the cells with the largest |mode|
     contribution sigma_m |u_m|, :func:`vcs.atlas.pca.top_variation_mask`).
 
-    A wall field on the wall, one row anterior and one posterior; a volume field (U, p) in the
+    A wall field on the wall, one row from the front and one from the back; a volume field (U, p) in the
     lumen clipped along its sagittal plane. ``share`` is the mode's explained variance (%).
     """
     cmap, label, title = field_cmap(name), field_label(name), field_title(name)
@@ -461,7 +459,7 @@ def flow_mode_png(
     if on_wall:
         meshes = {k: wall_surface(points, {"v": v[:, :, -1]}) for k, v in arrays.items()}
         meshes["m"] = wall_surface(points, {"mask": mask[:, :, -1].astype(float)})
-        views = ["anterior", "posterior"]
+        views = ["front", "back"]
     else:
         keep = facing_half(model, _theta(points), frame.normal)
         meshes = {k: lumen_surface(points, {"v": v}, keep) for k, v in arrays.items()}
