@@ -75,7 +75,7 @@ def test_every_parser_refuses_abbreviations():
     p = build_parser()
     sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
     assert p.allow_abbrev is False
-    assert len(sub.choices) == 8 and all(sp.allow_abbrev is False for sp in sub.choices.values())
+    assert len(sub.choices) == 9 and all(sp.allow_abbrev is False for sp in sub.choices.values())
     one_line_error(run("phantom", "--kind", "tube", "--outp", "x.stl"), "vcs phantom: error:", "--outp")
     one_line_error(run("fit", "m.stl", "-o", "f", "--rec", "2"), "vcs fit: error:", "unrecognized arguments: --rec 2")
     one_line_error(run("--verb", "phantom", "-o", "x.stl"), "--verb")
@@ -203,6 +203,7 @@ def _commands(d: Path, mesh: Path, model: Path, out: str):
         "coords": ["coords", model, pts, "-o", out.format(ext=".csv")],
         "cartesian": ["cartesian", model, d / "c.csv", "-o", out.format(ext=".csv")],
         "wall": ["wall", model, "-o", out.format(ext=".stl")],
+        "lumen": ["lumen", mesh, "--model", model, "-o", out.format(ext=".stl")],
         "grid": ["grid", model, "-o", out.format(ext=".vtu"), "--n-tau", "4", "--n-theta", "8", "--n-rho", "2"],
         "phantom": ["phantom", "--kind", "tube", "-o", out.format(ext=".stl")],
         "sensitivity": ["sensitivity", mesh, "--L", "5", "--K", "5", "--R", "5", "-o", out.format(ext="")],
@@ -231,7 +232,9 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", list(CASES))
-@pytest.mark.parametrize("command", ["fit", "ends", "coords", "cartesian", "wall", "grid", "phantom", "sensitivity"])
+@pytest.mark.parametrize(
+    "command", ["fit", "ends", "coords", "cartesian", "wall", "grid", "lumen", "phantom", "sensitivity"]
+)
 def test_bad_output_paths_are_one_line_and_write_nothing(workdir, command, case):
     """-o with a missing parent, under a regular file, or naming a directory (for file outputs):
     exit 2, one line, before any work; nothing created, every input unchanged."""
@@ -252,6 +255,7 @@ def test_bad_output_paths_are_one_line_and_write_nothing(workdir, command, case)
         ("grid", "g.xyz", ".vtu"),
         ("grid", "g", ".vtu"),
         ("wall", "w.vtu", ".stl"),
+        ("lumen", "l.vtp", ".stl"),
         ("phantom", "p.obj", ".stl"),
         ("ends", "e.csv", ".json"),
         ("coords", "c.json", ".csv or .txt"),
@@ -285,7 +289,7 @@ def read_only_dir(tmp_path):
         ro.chmod(0o755)
 
 
-@pytest.mark.parametrize("command", ["fit", "coords", "wall", "grid", "phantom", "sensitivity"])
+@pytest.mark.parametrize("command", ["fit", "coords", "wall", "grid", "lumen", "phantom", "sensitivity"])
 def test_output_directory_not_writable(workdir, read_only_dir, command):
     """-o in a directory that refuses new files: exit 2, one line naming the directory, before any
     work; nothing written."""
