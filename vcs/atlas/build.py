@@ -92,8 +92,12 @@ def build_atlas(
     np.savez_compressed(out / "atlas.npz", **arrays)
     if figures:
         from vcs.atlas.plots import COLOUR_PERCENTILES, FIELD_LIMIT_PAD, write_atlas_figures
+        from vcs.atlas.plots3d import write_listed_3d
 
         written = write_atlas_figures(atlas, out, png_dir=figure_dir)
+        written["figure_seconds"] = write_listed_3d(
+            atlas, written["mean_model"], written["png_dir"], out, written["files"], grid=written["grid"]
+        )
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
         summary["colour_limits"] = {
             "percentiles": list(COLOUR_PERCENTILES),

@@ -975,8 +975,8 @@ def write_atlas_figures(atlas: Atlas, out_dir: PathLike, *, png_dir: PathLike | 
         ``files``: {what: file name relative to ``out_dir``}; ``renderer``: list of the 3-D
         renderer(s) used (``"pyvista"``, ``"matplotlib"``), empty without flow figures;
         ``colour_limits``: {flow figure: [lo, hi]} (see :func:`write_flow_files`);
-        ``figure_seconds``: {3-D figure: render time (s)} of :func:`vcs.atlas.plots3d.write_3d_figures`
-        (empty when no off-screen render window could be opened: the 3-D figures are then missing).
+        ``mean_model``, ``grid`` and ``png_dir``: what :func:`vcs.atlas.plots3d.write_listed_3d`
+        draws the 3-D figures from (:func:`vcs.atlas.build.build_atlas` calls it).
     """
     from vcs.vessel import VesselModel
 
@@ -995,21 +995,13 @@ def write_atlas_figures(atlas: Atlas, out_dir: PathLike, *, png_dir: PathLike | 
         files.update(write_flow_files(atlas, mean_model, out, png_dir=pngs, grid=grid))
     renderer = files.pop("renderer", [])
     limits = files.pop("colour_limits", {})
-    seconds = _write_3d(atlas, mean_model, pngs, out, files, grid=grid)
-    return {"files": files, "renderer": renderer, "colour_limits": limits, "figure_seconds": seconds}
-
-
-def _write_3d(
-    atlas: Atlas, mean_model: VesselModel, pngs: Path, out: Path, files: dict[str, Any], *, grid: Any
-) -> dict[str, float]:
-    """The 3-D figures (:func:`vcs.atlas.plots3d.write_3d_figures`), listed in ``files``; their
-    render seconds. Without an off-screen render window: none, and a warning."""
-    from vcs.atlas.plots3d import write_3d_figures
-
-    try:
-        written = write_3d_figures(atlas, mean_model, pngs, info=None if grid is None else grid[1])
-    except Exception as exc:  # noqa: BLE001  # no off-screen render window: the flat figures remain
-        log.warning("no 3-D atlas figures: pyvista off-screen rendering failed (%s)", exc)
-        return {}
-    files.update({k: _relative(Path(v), out) for k, v in written["files"].items()})
-    return {k: round(v, 3) for k, v in written["seconds"].items()}
+    # the 3-D figures (vcs.atlas.plots3d, which imports this module) are drawn by the caller
+    # (vcs.atlas.build) from ``mean_model`` and ``grid``
+    return {
+        "files": files,
+        "renderer": renderer,
+        "colour_limits": limits,
+        "mean_model": mean_model,
+        "grid": grid,
+        "png_dir": pngs,
+    }

@@ -49,6 +49,7 @@ from vcs.atlas.plots import (
     NOTE_FONT_PT,
     TITLE_FONT_PT,
     PathLike,
+    _relative,
     _scalar,
     colour_bar_labels,
     field_label,
@@ -477,6 +478,20 @@ def flow_mode_png(
     note = LEFT_OUT_NOTE if any(bool(np.isnan(v).any()) for v in arrays.values()) else ""
     render_panels(shown, frame, path, n_cols=4, bar=ColourBar(label, clim, cmap, panel=1), note=note)
     return clim
+
+
+def write_listed_3d(
+    atlas: Atlas, mean_model: VesselModel, pngs: Path, out: Path, files: dict[str, Any], *, grid: Any
+) -> dict[str, float]:
+    """The 3-D figures (:func:`write_3d_figures`), listed in ``files`` (relative to ``out``); their
+    render seconds. Without an off-screen render window: none, and a warning."""
+    try:
+        written = write_3d_figures(atlas, mean_model, pngs, info=None if grid is None else grid[1])
+    except Exception as exc:  # noqa: BLE001  # no off-screen render window: the flat figures remain
+        log.warning("no 3-D atlas figures: pyvista off-screen rendering failed (%s)", exc)
+        return {}
+    files.update({k: _relative(Path(v), out) for k, v in written["files"].items()})
+    return {k: round(v, 3) for k, v in written["seconds"].items()}
 
 
 def write_3d_figures(
