@@ -106,7 +106,11 @@ def build_atlas(
             f"sigma; of a wall field: its values on the wall), widened by {100 * FIELD_LIMIT_PAD:g} % at either end",
             "limits": written["colour_limits"],
         }
-        summary["figure_seconds"] = written["figure_seconds"]
+        # render times are not written into atlas.json (it holds no timings: a rerun or a SLURM run
+        # of the same cohort gives the same file); the log has them
+        seconds = written["figure_seconds"]
+        if seconds:
+            log.info("3-D figures: %d rendered in %.1f s", len(seconds), sum(seconds.values()))
     (out / "atlas.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
     log.info("atlas of %d patients (%d excluded) written to %s", len(atlas.patients), len(atlas.excluded), out)
     return atlas
