@@ -25,6 +25,15 @@ def chain(rules, ids=IDS):
 COHORT = {("atlas_build", None), ("atlas_complete", None), ("all", None)}
 
 
+def _cohort_rows() -> list[dict]:
+    """The sheet rows of the `cohort` fixture (to edit one patient's columns)."""
+    return [
+        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
+        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
+        {"id": "P3", "mesh": "meshes/p3.stl"},
+    ]
+
+
 def test_fresh_cohort_plans_every_stage_once_per_patient(cohort):
     assert cohort.planned_jobs() == chain(PER_PATIENT) | COHORT
 
@@ -68,11 +77,7 @@ def test_one_patients_own_cfd_values_rerun_only_that_patients_cfd(cohort):
     """A flow rate (or cell size) in one row of the sheet is a param of that patient's case:
     its CFD, sampling and the atlas rerun, nobody's fit, nobody else's CFD."""
     cohort.fake_finished_run()
-    rows = [
-        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
-        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
-        {"id": "P3", "mesh": "meshes/p3.stl"},
-    ]
+    rows = _cohort_rows()
     rows[1]["flow_rate_l_min"] = "2.5"
     cohort.write_sheet(rows)
     assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"], ["P2"]) | COHORT
@@ -89,11 +94,7 @@ def test_one_patients_geometry_and_outlets_rerun_only_that_patients_cfd(cohort):
     """cfd_geometry surface in one row: that patient's lumen (not its fit, nobody's wall) and its
     CFD; then its outlets / Windkessel totals: its CFD only."""
     cohort.fake_finished_run()
-    rows = [
-        {"id": "P1", "mesh": "meshes/p1.stl", "units": "mm"},
-        {"id": "P2", "mesh": "meshes/p 2 scan.stl", "units": "mm", "inlet": "0,0,0", "outlet": "0,0,100"},
-        {"id": "P3", "mesh": "meshes/p3.stl"},
-    ]
+    rows = _cohort_rows()
     rows[1]["cfd_geometry"] = "surface"
     cohort.write_sheet(rows)
     cfd = ["openfoam_case", "openfoam_solve", "fields_sample"]
