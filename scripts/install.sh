@@ -12,6 +12,8 @@ command -v munged >/dev/null 2>&1 || need_apt+=(munge)
 [ -e /usr/lib/x86_64-linux-gnu/libGL.so.1 ] || [ -e /usr/lib/aarch64-linux-gnu/libGL.so.1 ] || need_apt+=(libgl1)
 dpkg -s libxrender1 >/dev/null 2>&1 || need_apt+=(libxrender1)
 dpkg -s xvfb >/dev/null 2>&1 || need_apt+=(xvfb)
+# headless browser: the workflow test opens the Snakemake report as a person would (screenshot, DOM)
+command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
 # a Python >= 3.11 with venv/ensurepip (Debian splits them into python3-venv)
 PY=${PYTHON:-python3}
 command -v "$PY" >/dev/null 2>&1 || need_apt+=(python3)
