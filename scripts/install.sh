@@ -32,10 +32,10 @@ if [ ! -x .venv/bin/python ]; then
 fi
 stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
 if [ ! -f "$stamp" ]; then
-  echo "[install] pip install -e .[test] (pinned)"
+  echo "[install] pip install -e .[test,docs] (pinned)"
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null 2>&1 || true
   # the build backend's warnings go to the log; shown in full when the install fails
-  if ! .venv/bin/python -m pip install -q -e '.[test]' > .venv/pip-install.log 2>&1; then
+  if ! .venv/bin/python -m pip install -q -e '.[test,docs]' > .venv/pip-install.log 2>&1; then
     cat .venv/pip-install.log >&2
     echo "[install] error: pip install failed (log above, also in .venv/pip-install.log)" >&2
     exit 1

@@ -58,6 +58,17 @@ def grid_axes(
     ------
     VCSInputError
         When a count is below 2.
+
+    Examples
+    --------
+    >>> from vcs.grid import grid_axes
+    >>> tau, theta, rho_n = grid_axes(5, 4, 3)
+    >>> tau
+    array([0.  , 0.25, 0.5 , 0.75, 1.  ])
+    >>> theta.round(4)
+    array([0.    , 1.5708, 3.1416, 4.7124])
+    >>> rho_n
+    array([0. , 0.5, 1. ])
     """
     if min(n_tau, n_theta, n_rho) < 2:
         raise VCSInputError(f"the grid needs n_tau, n_theta, n_rho >= 2, got {n_tau}, {n_theta}, {n_rho}")

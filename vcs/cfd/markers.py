@@ -71,6 +71,15 @@ def tawss(wss: ArrayLike, times: ArrayLike | None = None, *, vector: bool = Fals
     -------
     (...) float
         TAWSS, in the unit of ``wss``.
+
+    Examples
+    --------
+    A shear of 1 Pa reversing to -1 Pa for half the cycle has TAWSS 1 Pa:
+
+    >>> import numpy as np
+    >>> from vcs.cfd.markers import tawss
+    >>> tawss(np.array([1.0, 1.0, -1.0, -1.0]))
+    array(1.)
     """
     _, mag = _magnitude(wss, vector)
     return _time_mean(mag, times)
@@ -115,6 +124,15 @@ def osi(wss: ArrayLike, times: ArrayLike | None = None, *, vector: bool = False)
     -------
     (...) float
         OSI in [0, 1/2]; ``nan`` where the shear is zero throughout.
+
+    Examples
+    --------
+    A steady shear has OSI 0, a zero-mean oscillating one 1/2:
+
+    >>> import numpy as np
+    >>> from vcs.cfd.markers import osi
+    >>> osi(np.array([[2.0, 1.0], [2.0, -1.0], [2.0, 1.0], [2.0, -1.0]]))
+    array([0. , 0.5])
     """
     w, mag = _magnitude(wss, vector)
     return osi_from_averages(_time_mean(w, times), _time_mean(mag, times), vector=vector)

@@ -53,6 +53,14 @@ def poiseuille_pressure_gradient(flow_rate: float, radius: float, viscosity: flo
     -------
     float
         -dp/ds (positive for flow towards +s).
+
+    Examples
+    --------
+    5 L/min of blood (mu = 3.57e-3 Pa s) through a 12.5 mm radius pipe, in Pa/m:
+
+    >>> from vcs.cfd.verification import poiseuille_pressure_gradient
+    >>> round(poiseuille_pressure_gradient(5 / 60000, 12.5e-3, 3.57e-3), 3)
+    31.03
     """
     return 8.0 * viscosity * flow_rate / (np.pi * radius**4)
 
@@ -73,6 +81,12 @@ def poiseuille_wall_shear_stress(flow_rate: float, radius: float, viscosity: flo
     -------
     float
         |tau_w|, in the unit chosen by ``viscosity``.
+
+    Examples
+    --------
+    >>> from vcs.cfd.verification import poiseuille_wall_shear_stress
+    >>> round(poiseuille_wall_shear_stress(5 / 60000, 12.5e-3, 3.57e-3), 4)
+    0.1939
     """
     return 4.0 * viscosity * flow_rate / (np.pi * radius**3)
 
@@ -93,6 +107,14 @@ def dean_number(reynolds: float, radius: float, curvature_radius: float) -> floa
     -------
     float
         De.
+
+    Examples
+    --------
+    The curved pipe of the CFD verification: Re 500, a / R = 0.15:
+
+    >>> from vcs.cfd.verification import dean_number
+    >>> round(dean_number(500, 5.0, 33.3), 1)
+    193.7
     """
     return float(reynolds * np.sqrt(radius / curvature_radius))
 
