@@ -9,6 +9,9 @@ Public API (all lengths in mm)::
     model.save("model.json"); VesselModel.load("model.json")
 """
 
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
+
 from vcs.ends import Ends, find_ends
 from vcs.errors import VCSInputError
 from vcs.grid import MeasurementGrid, measurement_grid
@@ -19,6 +22,11 @@ from vcs.phantoms.sweep import Phantom
 from vcs.surface import WallMesh, wall_mesh
 from vcs.vessel import VesselModel, fit_vessel
 from vcs.wall import WallFit, WallModel, fit_wall
+
+try:  # one source of the version: pyproject.toml (also in results/provenance.json and the docs)
+    __version__ = _version("vcs-atlas")
+except PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "Ends",

@@ -34,6 +34,14 @@ def _package_versions():
     return versions
 
 
+def _vcs_version():
+    """The package version (one source: pyproject.toml), as vcs.__version__ and the docs show it."""
+    try:
+        return importlib.metadata.version("vcs-atlas")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
 def _openfoam():
     try:
         from vcs.cfd import FLAVOURS, detect_openfoam
@@ -63,6 +71,7 @@ def write_provenance(outcome, logfile):
     status = _git("status", "--porcelain", "--untracked-files=no")
     record = {
         "outcome": outcome,
+        "vcs_version": _vcs_version(),
         "start": start.isoformat(timespec="seconds"),
         "end": end.isoformat(timespec="seconds"),
         "duration_s": round((end - start).total_seconds(), 3),
