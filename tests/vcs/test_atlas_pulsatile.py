@@ -343,7 +343,13 @@ def _run_atlas_build_script(tmp_path, models, fields) -> tuple[int, str, dict | 
     smk = {
         "input": inputs,
         "params": {"ids": list(fields), "options": {"n_modes": 1, "figures": False}},
-        "output": {"json": str(out / "atlas.json"), "npz": str(out / "atlas.npz"), "figures": str(out / "figures")},
+        "output": {
+            "json": str(out / "atlas.json"),
+            "npz": str(out / "atlas.npz"),
+            "figures": str(out / "figures"),
+            "patients_html": str(out / "patients.html"),
+            "patients_tsv": str(out / "patients.tsv"),
+        },
         "log": [str(tmp_path / "atlas.log")],
         "scriptdir": str(script.parent),
     }

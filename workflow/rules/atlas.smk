@@ -4,8 +4,42 @@
 # workflow/scripts/_failure.py), so the atlas is always built from the others and lists it under
 # patients_excluded with the stage and the reason. atlas.npz and the VTP/VTU files of
 # vcs.atlas.plots are written beside atlas.json, the PNG figures (once) to results/atlas/figures/
-# for `snakemake --report`. Then atlas_complete fails the run, with one line naming every patient
-# left out, unless all of them are in the atlas.
+# for `snakemake --report`, with the cohort table (patients.html / .tsv: every patient, its
+# status and why it is not in the atlas). Then atlas_complete fails the run, with one line naming
+# every patient left out, unless all of them are in the atlas.
+#
+# In the report (workflow/report/workflow.rst): atlas.json, the explained variance and the table
+# under Atlas / Patients; each figure of figures/ under Shape (subcategory: mean shape, mode k) or
+# Flow (subcategory: the field), by its file name (atlas_figure_place), with the caption of its
+# kind (workflow/report/atlas_figure.rst).
+
+_ATLAS_FIGURE = re.compile(r"(?P<kind>shape|flow_(?P<field>.+))_(?P<what>mean|mode(?P<k>[0-9]+))(?P<rest>_3d|_deformation)?")
+
+
+def atlas_figure_place(name):
+    """(category, subcategory, label) of the atlas figure ``{name}.png`` in the report: shape
+    figures under Shape by mean / mode, flow figures under Flow by field, anything else (the
+    explained variance) under Atlas."""
+    m = _ATLAS_FIGURE.fullmatch(name)
+    if m is None:
+        return "Atlas", "Cohort", name.replace("_", " ")
+    what = "mean" if m["what"] == "mean" else f"mode {m['k']}"
+    view = "3-D" if m["rest"] == "_3d" else "flat"
+    if m["kind"] == "shape":
+        return "Shape", "mean shape" if what == "mean" else what, f"{what}, {view}"
+    return "Flow", m["field"], f"{m['field']} {what}, {view}"
+
+
+def atlas_figure_category(wildcards):
+    return atlas_figure_place(wildcards.name)[0]
+
+
+def atlas_figure_subcategory(wildcards):
+    return atlas_figure_place(wildcards.name)[1]
+
+
+def atlas_figure_labels(wildcards):
+    return {"figure": atlas_figure_place(wildcards.name)[2]}
 
 
 rule atlas_build:
@@ -17,14 +51,30 @@ rule atlas_build:
         fields=patient_files("results/patients/{id}/fields.npz"),
         statuses=patient_files("results/patients/{id}/status.json"),
     output:
-        json=report("results/atlas/atlas.json", category="Atlas", labels={"file": "atlas.json"}),
+        json=report(
+            "results/atlas/atlas.json",
+            caption="../report/atlas_json.rst",
+            category="Atlas",
+            subcategory="Cohort",
+            labels={"figure": "atlas.json (the numbers)"},
+        ),
         npz="results/atlas/atlas.npz",
         figures=report(
             directory("results/atlas/figures"),
             patterns=["{name}.png"],
-            category="Atlas",
-            labels={"figure": "{name}"},
+            caption="../report/atlas_figure.rst",
+            category=atlas_figure_category,
+            subcategory=atlas_figure_subcategory,
+            labels=atlas_figure_labels,
         ),
+        patients_html=report(
+            "results/atlas/patients.html",
+            caption="../report/patients.rst",
+            category="Patients",
+            subcategory="Cohort",
+            labels={"patient": "all", "figure": "status of every patient"},
+        ),
+        patients_tsv="results/atlas/patients.tsv",
     params:
         ids=PATIENT_IDS,
         options=config["atlas"],

@@ -4,13 +4,16 @@ its status.json says why, or its fields are a placeholder) is listed in atlas.js
 patients_excluded with the stage and the reason; the atlas is built from the others. The PNGs go
 to the rule's figures/ directory (once), the VTP/VTU files beside atlas.json. A pulsatile cohort's
 fields.npz (cycle averages, wall markers, phase fields) are passed as they are: build_atlas decides
-which PCAs the cohort gets, and refuses a cohort that mixes pulsatile and steady patients."""
+which PCAs the cohort gets, and refuses a cohort that mixes pulsatile and steady patients. Last,
+the report's cohort table (patients.html and patients.tsv, _cohort_table) from the atlas.json just
+written, the statuses and the fit reports: every patient of the sheet, in the atlas or not."""
 
 import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, snakemake.scriptdir)  # noqa: F821 (snakemake is injected)
+import _cohort_table  # noqa: E402
 import _common  # noqa: E402
 import _failure  # noqa: E402
 
@@ -70,6 +73,10 @@ def main(smk):
         knots.get("R"),
         knots.get("L_fitted"),
     )
+    with open(smk.output.json) as fh:
+        rows = _cohort_table.cohort_rows(ids, json.load(fh), statuses, reports)
+    _cohort_table.write_tsv(rows, smk.output.patients_tsv)
+    _cohort_table.write_html(rows, smk.output.patients_html)
     log.info("atlas of %d patients (%d excluded) -> %s", len(atlas.patients), len(atlas.excluded), smk.output.json)
 
 
