@@ -6,8 +6,9 @@
 #
 # Per patient (results/patients/<id>/): vcs_fit -> vcs_wall (or vcs_lumen: cfd geometry surface)
 # -> openfoam_case -> openfoam_solve
-# -> fields_sample; then atlas_build over the cohort (results/atlas/), atlas_complete (exit status:
-# non-zero with one line when a patient is not in the atlas) and results/provenance.json.
+# -> fields_sample -> patient_qc (qc.png: the QC sheet); then atlas_build over the cohort
+# (results/atlas/), atlas_complete (exit status: non-zero with one line when a patient is not in
+# the atlas) and results/provenance.json.
 
 from snakemake.utils import min_version
 
@@ -23,6 +24,7 @@ include: "workflow/rules/geometry.smk"
 include: "workflow/rules/case.smk"
 include: "workflow/rules/solve.smk"
 include: "workflow/rules/sample.smk"
+include: "workflow/rules/qc.smk"
 include: "workflow/rules/atlas.smk"
 include: "workflow/rules/keep.smk"
 include: "workflow/rules/provenance.smk"
@@ -33,4 +35,5 @@ rule all:
         "results/atlas/atlas.json",
         "results/atlas/complete.txt",  # fails the run (after the atlas) when a patient is left out
         patient_files("results/patients/{id}/fields.npz"),
+        patient_files("results/patients/{id}/qc.png"),  # per-patient QC sheets (report: Patients)
     default_target: True

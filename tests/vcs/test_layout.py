@@ -272,7 +272,7 @@ def test_subpackages_import_their_modules_not_themselves():
 def test_dependency_direction():
     """workflow/ -> vcs/ -> numpy/scipy: vcs never imports snakemake or workflow code; jinja2 (the
     OpenFOAM templates) only inside vcs.cfd; no module outside vcs.cfd imports vcs.cfd except the
-    CLI (none does today)."""
+    top layers that use everything: the CLI and vcs.qc (a patient's QC sheet: its fit and its CFD)."""
     external = external_imports()
     bad = [
         f"{m} imports {pkg}"
@@ -285,7 +285,7 @@ def test_dependency_direction():
         f"{m} imports {n}"
         for m, targets in graph.items()
         for n in targets
-        if n.startswith("vcs.cfd") and not m.startswith(("vcs.cfd", "vcs.cli"))
+        if n.startswith("vcs.cfd") and not m.startswith(("vcs.cfd", "vcs.cli", "vcs.qc"))
     ]
     assert not bad, "; ".join(bad)
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from conftest import parse_jobs
 
-PER_PATIENT = ["vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample"]
+PER_PATIENT = ["vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"]
 IDS = ["P1", "P2", "P3"]
 
 
@@ -54,7 +54,7 @@ def test_editing_one_mesh_reruns_only_that_patient_and_the_atlas(cohort):
 def test_cfd_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     cohort.fake_finished_run()
     cohort.update_config("cfd", "solver", "max_iterations", 777)
-    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
+    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"]) | COHORT
 
 
 def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort):
@@ -63,14 +63,14 @@ def test_mesh_size_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     new = 3.0e-3 if current == "auto" else 1.5 * current  # a real change, whatever the default
     cohort.update_config("cfd", "mesh", "cell_size", new)
     planned = cohort.planned_jobs()
-    assert planned == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
+    assert planned == chain(["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"]) | COHORT
     assert not {job for job in planned if job[0] in ("vcs_fit", "vcs_wall")}
 
 
 def test_auto_sizing_parameter_reruns_cfd_and_downstream_but_not_the_fit(cohort):
     cohort.fake_finished_run()
     cohort.update_config("cfd", "mesh", "cells_across_end", 16)
-    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"]) | COHORT
+    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"]) | COHORT
 
 
 def test_one_patients_own_cfd_values_rerun_only_that_patients_cfd(cohort):
@@ -80,14 +80,20 @@ def test_one_patients_own_cfd_values_rerun_only_that_patients_cfd(cohort):
     rows = _cohort_rows()
     rows[1]["flow_rate_l_min"] = "2.5"
     cohort.write_sheet(rows)
-    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"], ["P2"]) | COHORT
+    assert (
+        cohort.planned_jobs()
+        == chain(["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"], ["P2"]) | COHORT
+    )
     cohort.fake_finished_run()
     rows[0]["cell_size_mm"] = "auto"  # the config's value, spelled out: no change
     cohort.write_sheet(rows)
     assert "Nothing to be done" in (lambda r: r.stdout + r.stderr)(cohort.snakemake("-n"))
     rows[2]["cell_size_mm"] = "0.8"
     cohort.write_sheet(rows)
-    assert cohort.planned_jobs() == chain(["openfoam_case", "openfoam_solve", "fields_sample"], ["P3"]) | COHORT
+    assert (
+        cohort.planned_jobs()
+        == chain(["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"], ["P3"]) | COHORT
+    )
 
 
 def test_one_patients_geometry_and_outlets_rerun_only_that_patients_cfd(cohort):
@@ -97,7 +103,7 @@ def test_one_patients_geometry_and_outlets_rerun_only_that_patients_cfd(cohort):
     rows = _cohort_rows()
     rows[1]["cfd_geometry"] = "surface"
     cohort.write_sheet(rows)
-    cfd = ["openfoam_case", "openfoam_solve", "fields_sample"]
+    cfd = ["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"]
     assert cohort.planned_jobs() == chain(["vcs_lumen", *cfd], ["P2"]) | COHORT
     cohort.fake_finished_run()
     rows[2] |= {"outlets": "rcr", "rcr_compliance_ml_mmhg": "1.5"}
@@ -120,7 +126,7 @@ def test_wall_resolution_reruns_from_the_wall_stl(cohort):
 def test_grid_size_reruns_sampling_and_atlas_only(cohort):
     cohort.fake_finished_run()
     cohort.update_config("grid", "n_rho", 5)
-    assert cohort.planned_jobs() == chain(["fields_sample"]) | COHORT
+    assert cohort.planned_jobs() == chain(["fields_sample", "patient_qc"]) | COHORT
 
 
 def test_atlas_option_reruns_the_atlas_only(cohort):
@@ -272,8 +278,8 @@ def slurm_submissions(text: str) -> list[tuple[str | None, set]]:
 
 def test_a_thousand_patients_on_slurm_are_one_job_each_and_the_atlas(tmp_path, workdir_factory, repo):
     """profiles/slurm groups each patient's chain into one SLURM job: a 1,000-patient sheet of
-    demo rows plans 6,003 jobs (phantom + 5 per patient, atlas, verdict, `all`) and submits 1,001:
-    one per patient holding exactly that patient's six jobs, and the atlas (atlas_complete and
+    demo rows plans 7,003 jobs (phantom + 6 per patient, atlas, verdict, `all`) and submits 1,001:
+    one per patient holding exactly that patient's seven jobs, and the atlas (atlas_complete and
     `all` run in Snakemake itself). A dry-run: nothing is submitted. (bench/slurm_plan.py prints
     how long the plan takes.)"""
     n = 1000
@@ -282,7 +288,7 @@ def test_a_thousand_patients_on_slurm_are_one_job_each_and_the_atlas(tmp_path, w
     )
     r = wd.snakemake("-n", "--profile", str(repo / "profiles" / "slurm"), timeout=1800)
     text = r.stdout + r.stderr
-    assert re.search(r"^total\s+6003$", text, re.M), text[-3000:]
+    assert re.search(r"^total\s+7003$", text, re.M), text[-3000:]
     plan = slurm_submissions(text)
     singles = sorted(rule for group, jobs in plan if group is None for rule, _ in jobs)
     assert singles == ["all", "atlas_build", "atlas_complete"], singles
@@ -502,7 +508,7 @@ def test_editing_a_patients_waveform_reruns_only_that_patients_cfd(cohort):
     cohort.fake_finished_run()
     assert cohort.planned_jobs() == set()
     _waveform(cohort.path / "p2.csv", _good_rows(30))  # same file, new content
-    cfd = ["openfoam_case", "openfoam_solve", "fields_sample"]
+    cfd = ["openfoam_case", "openfoam_solve", "fields_sample", "patient_qc"]
     assert cohort.planned_jobs() == chain(cfd, ["P2"]) | COHORT
 
 
