@@ -242,14 +242,20 @@ def _input_surface(d: SheetData) -> Any:
     res_path = d.files.fit_dir / "wall_residuals.vtp" if d.files.fit_dir else None
     if res_path is not None and res_path.is_file():
         res = pv.read(str(res_path))
-        r = np.asarray(res.point_data["residual"], float)
+        mm = _mm_per_output_unit(report)
+        r = mm * np.asarray(res.point_data["residual"], float)
         if "used" in res.point_data:
             r = np.where(np.asarray(res.point_data["used"]).astype(bool), r, np.nan)
-        dist, idx = cKDTree(np.asarray(res.points)).query(np.asarray(surface.points))
+        dist, idx = cKDTree(mm * np.asarray(res.points)).query(np.asarray(surface.points))
         tol = 1e-3 * max(float(report.get("median_radius_mm", 1.0)), 1e-6)
         values = np.where(dist <= tol, r[idx], np.nan)
     surface.point_data["residual"] = values
     return surface
+
+
+def _mm_per_output_unit(report: dict[str, Any]) -> float:
+    """Millimetres per unit of the fit's VTP outputs (``vcs fit`` writes them in the mesh's units)."""
+    return MM_PER_UNIT.get(str(report.get("outputs_units") or report.get("units") or "mm"), 1.0)
 
 
 def _end_discs(d: SheetData) -> list[Any]:
@@ -331,6 +337,7 @@ def panel_residual_map(ax: Axes, d: SheetData) -> None:
         raise PanelUnavailable("no fit residuals (the fit failed)")
     res = pv.read(str(res_path))
     pdata = {k: np.asarray(res.point_data[k]) for k in ("tau", "theta", "residual")}
+    pdata["residual"] = _mm_per_output_unit(d.report or {}) * pdata["residual"]
     used = np.asarray(res.point_data["used"]).astype(bool) if "used" in res.point_data else np.ones(res.n_points, bool)
     clim = _residual_limits(np.where(used, pdata["residual"], np.nan))
     cmap = "RdBu_r" if clim[0] < 0 else "viridis"
