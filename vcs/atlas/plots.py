@@ -614,11 +614,12 @@ def clipped_view_plotter(
             },
         )
         if i == bar_panel:
-            # VTK draws a horizontal bar's title over its middle label: labels below the bar,
-            # the title as a text of its own above it
+            # VTK draws a horizontal bar's title over its middle label, and labels "below" the bar
+            # (precede) over the bar itself at this height: labels above the bar (succeed), the
+            # title as a text of its own above them
             bar = pl.scalar_bars[label]
             bar.SetTitle("")
-            bar.SetTextPositionToPrecedeScalarBar()
+            bar.SetTextPositionToSucceedScalarBar()
             text = pl.add_text(
                 label,
                 position=(0.5, BAR_Y + BAR_HEIGHT + 0.005),

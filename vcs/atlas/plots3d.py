@@ -173,9 +173,9 @@ def render_panels(
     """Render ``panels`` (row-major, ``n_cols`` per row; default one row) off-screen to a PNG.
 
     White background, black text, one headlight; each panel's camera from ``frame``, zoomed to
-    fit. ``bar`` is drawn horizontally at the bottom of its panel (labels below it, its title
-    above: VTK draws a horizontal bar's title over its middle label); ``note`` at the bottom of
-    the first panel.
+    fit. ``bar`` is drawn horizontally at the bottom of its panel (labels above it, its title
+    above them: VTK draws a horizontal bar's title over its middle label, and labels below a bar
+    this thin over the bar itself); ``note`` at the bottom of the first panel.
 
     Raises
     ------
@@ -235,7 +235,7 @@ def _add_colour_bar(pl: pyvista.Plotter, bar: ColourBar) -> None:
     )
     actor = pl.scalar_bars[bar.label]
     actor.SetTitle("")
-    actor.SetTextPositionToPrecedeScalarBar()
+    actor.SetTextPositionToSucceedScalarBar()
     text = pl.add_text(
         bar.label,
         position=(0.5, BAR_Y + BAR_HEIGHT + 0.005),
