@@ -1,8 +1,8 @@
 """The CI configuration end to end with the real OpenFOAM (marker ``openfoam``): 4 synthetic
 aortas -> VCS fit -> wall STL -> snappyHexMesh + simpleFoam -> resampled fields -> atlas; then one
 patient's case is broken and the atlas must list it as excluded with the stage and reason while
-the others stay in, the run exiting non-zero after the atlas with one line naming it. A few minutes
-on 2 cores."""
+the others stay in, the run exiting non-zero after the atlas with one line naming it; last, the
+Snakemake report opened in headless Chromium (report_check.py). A few minutes on 2 cores."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import re
 import shutil
 
 import pytest
+import report_check
 from conftest import ci_workdir
 
 HAVE_FOAM = shutil.which("simpleFoam") is not None
@@ -74,6 +75,12 @@ def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path, workdi
 
     r = wd.snakemake("--report", str(res / "report.html"))
     assert (res / "report.html").stat().st_size > 10_000, r.stderr
+    # every figure in the report, captioned and not blank; the excluded patient in the cohort table
+    report_check.check_report(res / "report.html", res, excluded={broken: "mesh"})
+    if report_check.CHROMIUM is None:
+        pytest.skip("report checked; chromium (Debian's package, scripts/install.sh) not installed to open it")
+    # the report as a person opens it (headless Chromium): figures shown, the excluded patient red
+    report_check.check_in_chromium(res / "report.html", tmp_path / "report_shots", excluded={broken: "mesh"})
 
 
 def test_broken_mesh_is_a_failed_fit_with_one_line_in_the_log(tmp_path, workdir_factory):
