@@ -1,14 +1,14 @@
 #!/usr/bin/env python3
 """Render time of every 3-D atlas figure (vcs.atlas.plots3d) on a demo atlas, and the machine.
 
-    .venv/bin/python bench/render_figures.py [--cohort aorta|tubes] [-n 6] [-o DIR] [--docs]
+    .venv/bin/python bench/render_figures.py [--cohort aorta|tubes] [-n 6] [-o DIR]
 
 The atlas: ``aorta`` (default) fits n seeded aorta phantoms (vcs.phantoms, ~3 s each) and gives
 them synthetic flow fields on a 40 x 32 x 8 (tau, theta, rho_n) grid (a Poiseuille profile whose
 flow rate grows with the radius, a linear pressure drop, a WSS pattern with random amplitudes
 along and around the vessel); ``tubes`` uses bent tubes instead (no fit, seconds). Prints one line
 per figure (seconds, size in kB) and the total; the figures go to DIR (default a temporary folder).
-``--docs`` also copies a handful of them, re-encoded as palette PNGs, to docs/figures/.
+(The figures the docs show come from a real demo run: scripts/docs_figures.py.)
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-DOCS = ("shape_mean_3d", "shape_mode1_3d", "flow_U_mean_3d", "flow_p_mean_3d", "flow_WSS_mean_3d", "flow_WSS_mode1_3d")
 
 
 def aorta_models(n: int) -> list:
@@ -81,19 +80,11 @@ def machine() -> str:
     )
 
 
-def palette_png(src: Path, dst: Path, colours: int = 128) -> None:
-    """``src`` re-encoded as a palette PNG (a few tens of kB instead of hundreds)."""
-    from PIL import Image
-
-    Image.open(src).convert("RGB").quantize(colours, method=Image.Quantize.MEDIANCUT).save(dst, optimize=True)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cohort", choices=("aorta", "tubes"), default="aorta")
     ap.add_argument("-n", type=int, default=6, help="patients (default 6)")
     ap.add_argument("-o", "--out", type=Path, help="figure folder (default: a temporary one)")
-    ap.add_argument("--docs", action="store_true", help="copy a handful of figures to docs/figures/")
     args = ap.parse_args()
     from vcs.atlas import compute_atlas
     from vcs.atlas.plots3d import write_3d_figures
@@ -118,12 +109,6 @@ def main() -> None:
         print(f"{s:7.2f} s  {Path(written['files'][key]).stat().st_size / 1e3:6.0f} kB  {key}")
     total = sum(written["seconds"].values())
     print(f"{total:7.2f} s  total, {total / len(written['seconds']):.2f} s per figure ({out})")
-    if args.docs:
-        docs = REPO / "docs" / "figures"
-        docs.mkdir(parents=True, exist_ok=True)
-        for key in DOCS:
-            palette_png(Path(written["files"][key]), docs / f"{key}.png")
-        print(f"docs/figures: {sum((docs / f'{k}.png').stat().st_size for k in DOCS) / 1e3:.0f} kB")
     if args.out is None:
         shutil.rmtree(out)
 
