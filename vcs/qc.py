@@ -184,22 +184,25 @@ def _render(meshes: list[tuple[Any, dict[str, Any]]], camera: Callable[[Any], No
         pl.close()
 
 
-def _frame_camera(frame: ViewFrame, view: str) -> Callable[[Any], None]:
-    """The mean-frame camera of ``view`` (:meth:`ViewFrame.set_camera`: parallel projection), the
-    wall filling 95 % of the panel (the sheet's titles and colour bars are matplotlib's, outside)."""
+def _frame_camera(frame: ViewFrame, view: str, points: Any) -> Callable[[Any], None]:
+    """The mean-frame camera of ``view`` (as :meth:`ViewFrame.set_camera`: parallel projection),
+    framing ``points`` (mm: what the panel shows, e.g. a CFD domain longer than the model by its
+    flow extensions) in 95 % of the panel (the sheet's titles and colour bars are matplotlib's)."""
+    pts = np.asarray(points, float).reshape(-1, 3)
 
     def set_camera(cam: Any) -> None:
         d = frame.direction(view)
         right = np.cross(frame.up, d)
-        x, y = (frame.wall - frame.centre) @ right, (frame.wall - frame.centre) @ frame.up
+        x, y = (pts - frame.centre) @ right, (pts - frame.centre) @ frame.up
         scale = 1.05 * max(np.ptp(y) / 2, np.ptp(x) / (2 * PANEL_PX[0] / PANEL_PX[1]))
         focal = frame.centre + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * frame.up
+        size = max(frame.size, float(np.ptp(pts, axis=0).max()))
         cam.focal_point = tuple(focal)
-        cam.position = tuple(focal + 4.0 * frame.size * d)
+        cam.position = tuple(focal + 4.0 * size * d)
         cam.up = tuple(frame.up)
         cam.parallel_projection = True
         cam.parallel_scale = scale
-        cam.clipping_range = (0.1 * frame.size, 10.0 * frame.size)
+        cam.clipping_range = (0.1 * size, 10.0 * size)
 
     return set_camera
 
@@ -297,7 +300,7 @@ def panel_fit_overlay(ax: Axes, d: SheetData) -> None:
         (centerline_tube(model, 0.006 * frame.size), {"color": "#d62728"}),
     ]
     meshes += [(disc, {"color": "#ff7f0e", "opacity": 0.7}) for disc in _end_discs(d)]
-    ax.imshow(_render(meshes, _frame_camera(frame, "sagittal")))
+    ax.imshow(_render(meshes, _frame_camera(frame, "sagittal", surface.points)))
     ax.set_title("input mesh (grey), fitted wall (blue),\ncenterline (red), end planes (orange)")
 
 
@@ -319,7 +322,7 @@ def panel_residual_surface(ax: Axes, d: SheetData) -> None:
     clim = _residual_limits(np.asarray(surface.point_data["residual"]))
     cmap = "RdBu_r" if clim[0] < 0 else "viridis"
     look = {"scalars": "residual", "clim": clim, "cmap": cmap, "nan_color": NAN_COLOUR, **SURFACE_LOOK}
-    ax.imshow(_render([(surface, look)], _frame_camera(frame, "sagittal")))
+    ax.imshow(_render([(surface, look)], _frame_camera(frame, "sagittal", surface.points)))
     rep = d.report or {}
     ax.set_title(
         f"fit residual on the input mesh (Eq. 11)\nmean {rep.get('residual_mean_mm', np.nan):.3g} mm, "
@@ -372,7 +375,7 @@ def panel_mesh_slice(ax: Axes, d: SheetData) -> None:
     _, frame = _need_model(d)
     cut, _, _ = _mid_slice(d)
     look = {"color": "#f2f2f2", "show_edges": True, "edge_color": "#303030", "line_width": 0.4}
-    ax.imshow(_render([(cut, look)], _frame_camera(frame, "sagittal")))
+    ax.imshow(_render([(cut, look)], _frame_camera(frame, "sagittal", cut.points)))
     cells = (d.status or {}).get("cells")
     ax.set_title(
         f"CFD mesh on the centerline's plane\n{cells:,} cells" if cells else "CFD mesh on the centerline's plane"
@@ -380,25 +383,32 @@ def panel_mesh_slice(ax: Axes, d: SheetData) -> None:
 
 
 def panel_mesh_wall(ax: Axes, d: SheetData) -> None:
-    """Panel 5: close-up of the mid-plane slice at the wall half-way along the vessel."""
+    """Panel 5: close-up of the mid-plane slice at the wall, where the vessel has its median radius
+    (tau in [0.25, 0.75]; a coarctation or an aneurysm is not the place to judge the layers)."""
     model, frame = _need_model(d)
     cut, rim, normal = _mid_slice(d)
     if rim.size == 0:
         raise PanelUnavailable("the slice has no wall edge")
-    c = model.vcs.curve(np.array([0.5]))[0]
-    t = model.vcs.frame.tangent(np.array([0.5]))[0]
+    taus = np.linspace(0.25, 0.75, 51)
+    theta = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    T, TH = np.meshgrid(taus, theta, indexing="ij")
+    radius = np.asarray(model.fitted_wall()(T, TH), float).mean(axis=1)
+    tau = float(taus[np.argmin(np.abs(radius - np.median(radius)))])
+    c = model.vcs.curve(np.array([tau]))[0]
+    t = model.vcs.frame.tangent(np.array([tau]))[0]
     out = np.cross(normal, t)
     out /= np.linalg.norm(out)
     rel = rim - c
     along = rel @ out
-    off = np.linalg.norm(rel - np.outer(rel @ t, t) - np.outer(along, out), axis=1)
-    side = along > 0
-    if not side.any():
-        raise PanelUnavailable("no wall edge beside the centerline's midpoint")
-    wall = rim[side][np.argmin(np.abs((rel @ t)[side]) + off[side])]
-    radius = float(np.linalg.norm(wall - c))
-    half = 0.3 * radius
-    focal = wall - 0.7 * half * out
+    perp = np.linalg.norm(rel - np.outer(along, out), axis=1)  # distance from the ray c + s out
+    near = (along > 0) & (perp < 0.1 * float(np.median(radius)) + perp.min())
+    if not near.any():
+        raise PanelUnavailable(f"no wall edge beside the centerline at tau = {tau:.2f}")
+    wall = rim[near][np.argmin(along[near])]  # the first wall the ray meets
+    sizing = (((d.status or {}).get("mesh") or {}).get("sizing") or {}).get("cell_size_m")
+    half = 4.0 * 1000.0 * float(sizing) if sizing else 0.3 * float(np.median(radius))  # ~8 lumen cells high
+    half = min(half, 0.6 * float(np.linalg.norm(wall - c)))
+    focal = wall - 0.6 * half * out
     look = {"color": "#f2f2f2", "show_edges": True, "edge_color": "#303030", "line_width": 0.8}
     ax.imshow(_render([(cut, look)], _zoom_camera(focal, normal, out, half)))
     lay = ((d.status or {}).get("mesh") or {}).get("layers") or {}
@@ -408,7 +418,7 @@ def panel_mesh_wall(ax: Axes, d: SheetData) -> None:
         if lay.get("requested")
         else "no prism layers"
     )
-    ax.set_title(f"near-wall cells at tau = 0.5 (wall at the top), {2 * half:.2g} mm high\n{layers}")
+    ax.set_title(f"near-wall cells at tau = {tau:.2f} (wall at the top), {2 * half:.2g} mm high\n{layers}")
 
 
 def panel_residual_history(ax: Axes, d: SheetData) -> None:
@@ -448,7 +458,7 @@ def panel_velocity(ax: Axes, d: SheetData) -> None:
     u = np.asarray(cut.cell_data["U_mag"])
     clim = (0.0, max(robust_limits([u])[1], 1e-9))
     look = {"scalars": "U_mag", "preference": "cell", "clim": clim, "cmap": "viridis"}
-    ax.imshow(_render([(cut, look)], _frame_camera(frame, "sagittal")))
+    ax.imshow(_render([(cut, look)], _frame_camera(frame, "sagittal", cut.points)))
     avg = "time-averaged " if _averaged(d) else ""
     ax.set_title(f"{avg}|U| on the centerline's plane\nmax {u.max():.3g} m/s")
     _colour_bar(ax, clim, "viridis", "|U| (m/s)")
@@ -476,7 +486,7 @@ def panel_wss(ax: Axes, d: SheetData) -> None:
     wall = wall.scale(1000.0)
     clim = (0.0, max(robust_limits([wss])[1], 1e-9))
     look = {"scalars": "WSS_Pa", "preference": "cell", "clim": clim, "cmap": "inferno", **SURFACE_LOOK}
-    ax.imshow(_render([(wall, look)], _frame_camera(frame, "front")))
+    ax.imshow(_render([(wall, look)], _frame_camera(frame, "front", wall.points)))
     avg = "time-averaged " if _averaged(d) else ""
     ax.set_title(f"{avg}|WSS| on the CFD wall\nmedian {np.median(wss):.3g} Pa, max {wss.max():.3g} Pa")
     _colour_bar(ax, clim, "inferno", "|WSS| (Pa)")
