@@ -72,7 +72,7 @@ rule atlas_build:
             caption="../report/patients.rst",
             category="Patients",
             subcategory="Cohort",
-            labels={"patient": "all", "figure": "status of every patient"},
+            labels={"figure": "status of every patient"},
         ),
         patients_tsv="results/atlas/patients.tsv",
     params:

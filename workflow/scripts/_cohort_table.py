@@ -116,7 +116,7 @@ th, td { border: 1px solid #bbb; padding: 3px 6px; text-align: left; vertical-al
 th { background: #eee; }
 tr.included td.verdict { background: #d8f0d8; }
 tr.excluded td { background: #f8dcdc; }
-td.reason { max-width: 40em; }
+td.reason { max-width: 32em; overflow-wrap: anywhere; }
 """
 
 
