@@ -32,7 +32,7 @@ percentiles); NaN (wall cells left out of a PCA, e.g. at an ostium) is drawn gre
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -333,7 +333,10 @@ def shape_mode_png(pca: PCA, template: VesselModel, mode: int, frame: ViewFrame,
             Panel("centerlines: -2 sigma blue, +2 red", view, [ghost, *lines]),
         ]
     bar = ColourBar("radius change (mm)", clim, "RdBu_r", panel=1)
-    render_panels(panels, frame, path, n_cols=3, bar=bar)
+    # framed on every wall drawn (the +-2 sigma walls of a varied cohort reach beyond the mean's),
+    # the same scale in every panel
+    shown = np.vstack([frame.wall, *(np.asarray(walls[s].points) for s in walls)])
+    render_panels(panels, replace(frame, wall=shown), path, n_cols=3, bar=bar)
     return clim
 
 
