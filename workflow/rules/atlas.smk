@@ -10,36 +10,8 @@
 #
 # In the report (workflow/report/workflow.rst): atlas.json, the explained variance and the table
 # under Atlas / Patients; each figure of figures/ under Shape (subcategory: mean shape, mode k) or
-# Flow (subcategory: the field), by its file name (atlas_figure_place), with the caption of its
-# kind (workflow/report/atlas_figure.rst).
-
-_ATLAS_FIGURE = re.compile(r"(?P<kind>shape|flow_(?P<field>.+))_(?P<what>mean|mode(?P<k>[0-9]+))(?P<rest>_3d|_deformation)?")
-
-
-def atlas_figure_place(name):
-    """(category, subcategory, label) of the atlas figure ``{name}.png`` in the report: shape
-    figures under Shape by mean / mode, flow figures under Flow by field, anything else (the
-    explained variance) under Atlas."""
-    m = _ATLAS_FIGURE.fullmatch(name)
-    if m is None:
-        return "Atlas", "Cohort", name.replace("_", " ")
-    what = "mean" if m["what"] == "mean" else f"mode {m['k']}"
-    view = "3-D" if m["rest"] == "_3d" else "flat"
-    if m["kind"] == "shape":
-        return "Shape", "mean shape" if what == "mean" else what, f"{what}, {view}"
-    return "Flow", m["field"], f"{m['field']} {what}, {view}"
-
-
-def atlas_figure_category(wildcards):
-    return atlas_figure_place(wildcards.name)[0]
-
-
-def atlas_figure_subcategory(wildcards):
-    return atlas_figure_place(wildcards.name)[1]
-
-
-def atlas_figure_labels(wildcards):
-    return {"figure": atlas_figure_place(wildcards.name)[2]}
+# Flow (subcategory: the field), by its file name (atlas_figure_place in common.smk), with the
+# caption of its kind (workflow/report/atlas_figure.rst).
 
 
 rule atlas_build:
