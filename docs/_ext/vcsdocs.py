@@ -325,6 +325,19 @@ class CliReference(Directive):
         return out
 
 
+def read_bench_table(path: Path) -> dict[str, Any]:
+    """A result file of docs/data/bench (written by bench/_table.py's ``write_table``, or transcribed):
+    its command, measured, columns and rows, every row as long as the columns."""
+    data = json.loads(Path(path).read_text())
+    for field in ("command", "measured", "columns", "rows"):
+        if field not in data:
+            raise ValueError(f"{path}: no {field!r} (every result file names its command)")
+    bad = [i for i, row in enumerate(data["rows"]) if len(row) != len(data["columns"])]
+    if bad:
+        raise ValueError(f"{path}: rows {bad} do not have {len(data['columns'])} cells")
+    return data
+
+
 class BenchTable(Directive):
     required_arguments = 1
     has_content = False
@@ -334,14 +347,18 @@ class BenchTable(Directive):
         env = self.state.document.settings.env
         src = DOCS / self.arguments[0]
         env.note_dependency(str(src))
-        data = json.loads(src.read_text())
-        for field in ("command", "measured", "columns", "rows"):
-            if field not in data:
-                raise self.error(f"{src}: no {field!r} (every result file names its command)")
+        try:
+            data = read_bench_table(src)
+        except ValueError as e:
+            raise self.error(str(e)) from None
         out: list[nodes.Node] = [
             _table(data["columns"], [[_fmt_value(c) for c in row] for row in data["rows"]]),
         ]
-        made = f"Produced by `{data['command']}`; measured {data['measured']}."
+        source = data.get("source", "")
+        if source.startswith("transcribed"):  # names its re-measuring command itself
+            made = f"{source[0].upper()}{source[1:]}; measured {data['measured']}."
+        else:
+            made = f"Produced by `{data['command']}`; measured {data['measured']}."
         out.append(_para(made))
         for note in data.get("notes", []):
             out.append(_para(note))
