@@ -3,7 +3,8 @@ to_vcs throughput; and the `vcs fit` command itself on every shared real mesh: w
 peak memory and its stages.
 
 Prints Markdown tables; run with `.venv/bin/python bench/bench_vcs.py` (``--fit-only``: only the
-command's table; ``--repeat N``: runs per mesh, default 3). Meshes from ../shared/data are used when
+command's table; ``--repeat N``: runs per mesh, default 3; ``--json PATH``: also write the first
+table in the docs' format, e.g. docs/data/bench/bench_vcs.json). Meshes from ../shared/data are used when
 present; an aorta phantom is always used. Each figure is given as wall-clock time / CPU time of this
 process (`time.process_time`): on a machine shared with other jobs the wall time grows with the load,
 the CPU time does not (set OPENBLAS_NUM_THREADS=1 so that CPU time is not spread over BLAS threads).
@@ -181,21 +182,47 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--fit-only", action="store_true", help="only the `vcs fit` command's table")
     p.add_argument("--repeat", type=int, default=3, help="runs of `vcs fit` per mesh (default 3)")
+    p.add_argument("--json", type=Path, metavar="PATH", help="also write the library table as docs JSON")
     args = p.parse_args()
+    if args.json and args.fit_only:
+        p.error("--json writes the library table, which --fit-only leaves out")
     print(f"machine: {machine()}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
     if not args.fit_only:
-        library_table()
+        load_before = os.getloadavg()[0]
+        rows, note = library_table()
+        if args.json:
+            from _table import command_line, write_table
+
+            write_table(
+                args.json,
+                command=command_line(),
+                measured=f"load {load_before:.1f} at the start; best of 3, wall / CPU seconds",
+                columns=LIBRARY_COLUMNS,
+                rows=rows,
+                notes=[note],
+            )
     fit_command_table(args.repeat)
 
 
-def library_table():
+#: the library table's columns (as printed and in the docs JSON)
+LIBRARY_COLUMNS = [
+    "mesh",
+    "triangles",
+    "L",
+    "VCS build (centerline + frame) s",
+    "of which lumen path search s (wall)",
+    "wall fit K=19 R=15 s",
+    "whole `vcs fit` s",
+]
+
+
+def library_table() -> tuple[list[list[str]], str]:
+    """Print the library table (and the to_vcs throughput); return its rows and the throughput line."""
     print("best of 3; times are wall / CPU seconds")
-    print(
-        "| mesh | triangles | L | VCS build (centerline+frame) s | of which lumen path search s (wall) "
-        "| wall fit K=19 R=15 s | whole `vcs fit` s |"
-    )
+    print("| " + " | ".join(LIBRARY_COLUMNS) + " |")
     print("|---|---|---|---|---|---|---|")
     last = None
+    rows = []
     for name, surf, opts in cases():
         caps = {}
         for k in ("inlet_cap", "outlet_cap"):
@@ -212,16 +239,17 @@ def library_table():
             t_all, *_ = best_of(lambda: fit_vessel(path, **{k: str(v) for k, v in opts.items()}), 1)
         else:
             t_all, *_ = best_of(lambda: fit_vessel(surf), 1)
-        print(
-            f"| {name} | {len(surf.faces)} | {vcs.report['L']} | {fmt(t_vcs)} | {t_path:.3f} | {fmt(t_wall, 3)} "
-            f"| {fmt(t_all)} |"
-        )
+        rows.append([name, f"{len(surf.faces):,}", str(vcs.report["L"]), fmt(t_vcs), f"{t_path:.3f}"])
+        rows[-1] += [fmt(t_wall, 3), fmt(t_all)]
+        print("| " + " | ".join(rows[-1]) + " |")
         last = vcs
     rng = np.random.default_rng(0)
     c = last.curve(rng.uniform(0, 1, 10**6))
     pts = c + rng.normal(0, 5.0, c.shape)
     t, *_ = best_of(lambda: last.to_vcs(pts))
-    print(f"\nto_vcs on 10^6 points: {fmt(t)} s = {1e6 / t[0]:,.0f} points/s (wall), {1e6 / t[1]:,.0f} (CPU)")
+    note = f"`to_vcs` on 10^6 points: {fmt(t)} s = {1e6 / t[0]:,.0f} points/s (wall), {1e6 / t[1]:,.0f} (CPU)"
+    print(f"\n{note.replace('`', '')}")
+    return rows, note
 
 
 if __name__ == "__main__":

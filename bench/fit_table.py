@@ -9,7 +9,9 @@ the mesh to the wall model) as wall-clock / CPU seconds (`time.process_time`; on
 shared with other jobs the wall time grows with the load, the CPU time does not). All rows come
 from one run; the header says when and where.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/fit_table.py [--only NAME ...]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/fit_table.py [--only NAME ...] [--json PATH]
+
+``--json PATH`` also writes the table in the docs' format (docs/data/bench/fit_table.json).
 """
 
 from __future__ import annotations
@@ -32,6 +34,28 @@ from vcs.vessel import fit_vessel
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "vessels"
 
+#: row names of the shared real meshes (tests/vcs/test_real_vessels.py's case names)
+LABELS = {
+    "simvascular_open": "SimVascular open",
+    "simvascular_capped": "SimVascular capped",
+    "vmtk_closed": "vmtk closed segment",
+    "vmtk_bifurcation": "vmtk bifurcation (inlet -> one iliac)",
+    "aortacfd": "AortaCFD thoracic (3 branches)",
+    "vmr0154": "SPHinXsys VMR 0154 (4 stubs)",
+    "tah_coarse": "SPHinXsys TAH coarse",
+}
+COLUMNS = [
+    "mesh",
+    "units",
+    "L chosen",
+    "residual mean / p75 / max mm",
+    "used",
+    "of vessel",
+    "speed deviation",
+    "quality",
+    "whole fit s (wall / CPU)",
+]
+
 
 def _load(name: str):
     """A test module of tests/vcs by file name (its case tables and vessel builders)."""
@@ -48,7 +72,7 @@ def cases(tmp: Path):
         real = _load("test_real_vessels")
         for name, (mesh, opts) in real.CASES.items():
             opts = {k: (str(DATA / v) if k.endswith("cap") else v) for k, v in opts.items()}
-            yield name, DATA / mesh, opts
+            yield LABELS.get(name, name), DATA / mesh, opts
     for seed in range(8):
         ph = make_phantom("aorta", seed=seed)
         yield f"aorta phantom {seed}", Surface(ph.vertices, ph.faces, {}, "mm", "given", "phantom"), {}
@@ -77,14 +101,12 @@ def machine() -> str:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="*", help="rows whose name contains one of these")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     args = ap.parse_args(argv)
     print(f"{date.today().isoformat()}, {machine()}, load at start {os.getloadavg()[0]:.1f}")
-    print(
-        "| mesh | units | L chosen | residual mean / p75 / max mm | used | of vessel | speed deviation "
-        "| quality | whole fit s (wall / CPU) |"
-    )
+    print("| " + " | ".join(COLUMNS) + " |")
     print("|---|---|---|---|---|---|---|---|---|")
-    loads = []
+    loads, rows = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for name, mesh, opts in cases(Path(tmp)):
             if args.only and not any(k in name for k in args.only):
@@ -94,15 +116,32 @@ def main(argv: list[str] | None = None) -> None:
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             loads.append(os.getloadavg()[0])
             quality = r["quality"] if r["quality"] == "ok" else f"poor ({'; '.join(r['quality_reasons'])})"
-            print(
-                f"| {name} | {r['units']} | {r['L']} | {r['residual_mean_mm']:.4f} / {r['residual_p75_mm']:.4f} / "
-                f"{r['residual_max_mm']:.3f} | {100 * r['fraction_points_used']:.1f} % "
-                f"| {100 * r['fraction_points_used_of_vessel']:.1f} % | {r['arc_length_speed_deviation']:.4f} "
-                f"| {quality} | {wall:.1f} / {cpu:.1f} |",
-                flush=True,
+            rows.append(
+                [
+                    name,
+                    r["units"],
+                    str(r["L"]),
+                    f"{r['residual_mean_mm']:.4f} / {r['residual_p75_mm']:.4f} / {r['residual_max_mm']:.3f}",
+                    f"{100 * r['fraction_points_used']:.1f} %",
+                    f"{100 * r['fraction_points_used_of_vessel']:.1f} %",
+                    f"{r['arc_length_speed_deviation']:.4f}",
+                    quality,
+                    f"{wall:.1f} / {cpu:.1f}",
+                ]
             )
+            print("| " + " | ".join(rows[-1]) + " |", flush=True)
     print(f"\nload (1 min average) during the run: {min(loads):.1f}-{max(loads):.1f}" if loads else "")
     sys.stdout.flush()
+    if args.json and loads:
+        from _table import command_line, write_table
+
+        write_table(
+            args.json,
+            command=command_line(),
+            measured=f"load {min(loads):.1f}-{max(loads):.1f} during the run (1 min average); one run",
+            columns=COLUMNS,
+            rows=rows,
+        )
 
 
 if __name__ == "__main__":
