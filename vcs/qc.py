@@ -116,7 +116,7 @@ def patient_verdict(
     if why is not None:
         return False, f"failed at sampling: {why}"
     how = status.get("criterion_used") or "converged"
-    return True, f"converged ({how}), {status.get('cells', 0):,} cells"
+    return True, f"converged ({how}), {_num(status.get('cells'), ',.0f')} cells"
 
 
 def read_sheet_data(files: PatientFiles) -> SheetData:
@@ -378,7 +378,9 @@ def panel_mesh_slice(ax: Axes, d: SheetData) -> None:
     ax.imshow(_render([(cut, look)], _frame_camera(frame, "sagittal", cut.points)))
     cells = (d.status or {}).get("cells")
     ax.set_title(
-        f"CFD mesh on the centerline's plane\n{cells:,} cells" if cells else "CFD mesh on the centerline's plane"
+        f"CFD mesh on the centerline's plane\n{_num(cells, ',.0f')} cells"
+        if cells
+        else "CFD mesh on the centerline's plane"
     )
 
 
@@ -512,37 +514,41 @@ def panel_verdict(ax: Axes, d: SheetData) -> None:
     ax.set_title("key numbers")
 
 
+def _num(value: Any, fmt: str, scale: float = 1.0) -> str:
+    """``value`` (times ``scale``) formatted by ``fmt``, or ``-`` when it is missing or not a number."""
+    try:
+        return format(scale * float(value), fmt)
+    except (TypeError, ValueError):
+        return "-"
+
+
 def key_numbers(d: SheetData) -> list[str]:
-    """Lines of the fit's and the CFD's main numbers (what a reviewer checks first)."""
+    """Lines of the fit's and the CFD's main numbers (what a reviewer checks first); ``-`` for a
+    number a failed stage did not produce."""
     rep, st = d.report or {}, d.status or {}
     lines = []
     if rep and not rep.get("failed"):
         lines += [
-            f"fit quality       {rep.get('quality')}",
-            f"L, K, R           {rep.get('L')}, {rep.get('K')}, {rep.get('R')}",
-            f"centerline        {rep.get('centerline_length_mm', np.nan):.1f} mm",
-            f"median radius     {rep.get('median_radius_mm', np.nan):.2f} mm",
-            f"residual mean     {rep.get('residual_mean_mm', np.nan):.3f} mm",
-            f"residual max      {rep.get('residual_max_mm', np.nan):.3f} mm",
-            f"points used       {100 * float(rep.get('fraction_points_used', np.nan)):.1f} %",
+            f"fit quality       {rep.get('quality', '-')}",
+            f"L, K, R           {rep.get('L', '-')}, {rep.get('K', '-')}, {rep.get('R', '-')}",
+            f"centerline        {_num(rep.get('centerline_length_mm'), '.1f')} mm",
+            f"median radius     {_num(rep.get('median_radius_mm'), '.2f')} mm",
+            f"residual mean     {_num(rep.get('residual_mean_mm'), '.3f')} mm",
+            f"residual max      {_num(rep.get('residual_max_mm'), '.3f')} mm",
+            f"points used       {_num(rep.get('fraction_points_used'), '.1f', 100.0)} %",
         ]
     if st:
-        dp = (
-            (st.get("inlet_minus_outlet_pressure") or {}).get("Pa")
-            if isinstance(st.get("inlet_minus_outlet_pressure"), dict)
-            else None
-        )
+        dp = st.get("inlet_minus_outlet_pressure")
         lines += [
             "",
-            f"cells             {st.get('cells', 0):,}",
-            f"criterion         {st.get('criterion_used')}",
-            f"iterations        {st.get('iterations')}",
-            f"mass imbalance    {float(st.get('mass_imbalance') or np.nan):.2e}",
+            f"cells             {_num(st.get('cells'), ',.0f')}",
+            f"criterion         {st.get('criterion_used') or '-'}",
+            f"iterations        {_num(st.get('iterations'), '.0f')}",
+            f"mass imbalance    {_num(st.get('mass_imbalance'), '.2e')}",
+            f"p(in) - p(out)    {_num(dp.get('Pa') if isinstance(dp, dict) else None, '.4g')} Pa",
         ]
-        if dp is not None:
-            lines.append(f"p(in) - p(out)    {float(dp):.4g} Pa")
         for k, v in sorted((st.get("final_residuals") or {}).items()):
-            lines.append(f"final residual {k:<3}{float(v):.2e}")
+            lines.append(f"final residual {k:<3}{_num(v, '.2e')}")
     return lines
 
 

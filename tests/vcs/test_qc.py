@@ -99,3 +99,23 @@ def test_a_failed_fit_gets_a_sheet_naming_its_stage_and_reason(tmp_path):
     missing = {k: v for k, v in drawn.items() if k != "verdict"}
     assert all(v.startswith("not available") for v in missing.values()), drawn
     assert (tmp_path / "qc.png").stat().st_size > 10_000 and not list(tmp_path.glob(".qc*"))
+
+
+def test_a_patient_whose_mesh_failed_gets_its_fit_panels_and_key_numbers(fitted, tmp_path):
+    """The CI cohort's broken patient: a good fit, blockMesh failed (no cells, no residuals): the
+    verdict names the stage, the key numbers show '-' for what the CFD did not produce."""
+    from vcs.qc import PatientFiles, key_numbers, read_sheet_data, write_qc_sheet
+
+    mesh, fit = fitted
+    status = {"converged": False, "reason": "blockMesh failed: cannot read", "failed_log": "logs/log.blockMesh"}
+    status.update(cells=None, iterations=None, mass_imbalance=None, criterion_used=None)
+    (tmp_path / "status.json").write_text(json.dumps(status))
+    files = PatientFiles("P", mesh=mesh, fit_dir=fit, case_dir=tmp_path / "case", status=tmp_path / "status.json")
+    d = read_sheet_data(files)
+    usable, line = d.verdict
+    assert not usable and line.startswith("failed at mesh: ") and "blockMesh failed: cannot read" in line
+    lines = key_numbers(d)
+    assert "cells             -" in lines and any(line.startswith("fit quality       ok") for line in lines)
+    drawn = write_qc_sheet(files, tmp_path / "qc.png")
+    assert drawn["verdict"] == "drawn" and all(drawn[p] == "drawn" for p in FIT_PANELS), drawn
+    assert not any(v.startswith("could not draw") for v in drawn.values()), drawn

@@ -20,7 +20,7 @@ rule patient_qc:
             caption="../report/qc.rst",
             category="Patients",
             subcategory="{id}",
-            labels={"patient": "{id}", "figure": "QC sheet"},
+            labels={"figure": "QC sheet"},
         ),
     log:
         "results/logs/patient_qc/{id}.log",

@@ -19,14 +19,14 @@ rule openfoam_solve:
             caption="../report/patient_solve.rst",
             category="Patients",
             subcategory="{id}",
-            labels={"patient": "{id}", "figure": "{plot}"},
+            labels={"figure": "{plot}"},
         ),
         status=report(
             "results/patients/{id}/status.json",
             caption="../report/patient_status.rst",
             category="Patients",
             subcategory="{id}",
-            labels={"patient": "{id}", "figure": "status.json"},
+            labels={"figure": "status.json"},
         ),
     threads: solve_ranks()
     log:
