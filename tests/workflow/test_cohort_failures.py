@@ -195,6 +195,8 @@ def test_an_atlas_older_than_a_patient_result_is_moved_aside(wd):
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
     atlas_dir = wd.path / "results" / "atlas"
     assert not (atlas_dir / "atlas.json").exists() and not (atlas_dir / "figures").exists()
+    assert not (atlas_dir / "patients.html").exists()  # the old cohort table goes with its atlas
+    assert (wd.path / "results" / "previous" / "atlas" / "patients.html").is_file()
     assert "vcs-atlas: moved the atlas in results/atlas/ to results/previous/atlas/" in r.stdout + r.stderr
     # nothing lost (issue 22): the old atlas and the patient's earlier fit are kept aside
     assert (

@@ -105,7 +105,14 @@ ATLAS_INPUTS = (
     "results/patients/{id}/fields.npz",
     "results/patients/{id}/status.json",
 )
-ATLAS_OUTPUTS = ("results/atlas/atlas.json", "results/atlas/atlas.npz", "results/atlas/figures", "results/atlas/complete.txt")
+ATLAS_OUTPUTS = (
+    "results/atlas/atlas.json",
+    "results/atlas/atlas.npz",
+    "results/atlas/figures",
+    "results/atlas/patients.html",
+    "results/atlas/patients.tsv",
+    "results/atlas/complete.txt",
+)
 
 
 def drop_stale_atlas():
@@ -114,7 +121,7 @@ def drop_stale_atlas():
     When a patient's job failed outright (interrupted, no OpenFOAM, a bug) or a run stopped at a
     patient's file, the atlas is not rebuilt; the old one would still list that patient as
     included. If any input of atlas_build is missing or newer than atlas.json, atlas.json,
-    atlas.npz, figures/ and complete.txt are moved to results/previous/atlas/ (one line on
+    atlas.npz, figures/, the cohort table (patients.html/.tsv) and complete.txt are moved to results/previous/atlas/ (one line on
     stderr; nothing the user had is lost); the next run builds the atlas again. Without atlas.json (atlas_build failed and Snakemake removed its outputs),
     what is left of an older atlas (complete.txt) goes too.
     """
