@@ -344,13 +344,26 @@ def panel_residual_map(ax: Axes, d: SheetData) -> None:
     used = np.asarray(res.point_data["used"]).astype(bool) if "used" in res.point_data else np.ones(res.n_points, bool)
     clim = _residual_limits(np.where(used, pdata["residual"], np.nan))
     cmap = "RdBu_r" if clim[0] < 0 else "viridis"
+    # a filled map (triangulation of the used vertices in (tau, theta)), the unused vertices grey
+    # dots over it: scattered dots left white stripes between the mesh's rings
+    tri = _tau_theta_triangulation(pdata["tau"][used], pdata["theta"][used])
+    ax.tripcolor(tri, pdata["residual"][used], cmap=cmap, vmin=clim[0], vmax=clim[1], shading="gouraud")
     ax.scatter(pdata["tau"][~used], pdata["theta"][~used], c="lightgrey", s=1)
-    ax.scatter(
-        pdata["tau"][used], pdata["theta"][used], c=pdata["residual"][used], s=2, cmap=cmap, vmin=clim[0], vmax=clim[1]
-    )
     ax.set(xlim=(0, 1), ylim=(0, 2 * np.pi), xlabel="tau", ylabel="theta (rad)", title="fit residual over (tau, theta)")
     ax.set_aspect("auto")
     _colour_bar(ax, clim, cmap, "residual (mm)", pad=0.15)
+
+
+def _tau_theta_triangulation(tau: np.ndarray, theta: np.ndarray) -> Any:
+    """Delaunay triangulation of points in the (tau, theta) plane without the triangles that
+    bridge a gap (a branch's hole, the theta seam): edges longer than 5x the median are dropped."""
+    from matplotlib.tri import Triangulation
+
+    tri = Triangulation(tau, theta / (2 * np.pi))  # both axes on [0, 1]
+    x, y = tau[tri.triangles], (theta / (2 * np.pi))[tri.triangles]
+    edge = np.max(np.hypot(x - np.roll(x, 1, axis=1), y - np.roll(y, 1, axis=1)), axis=1)
+    tri.set_mask(edge > 5.0 * np.median(edge))
+    return Triangulation(tau, theta, triangles=tri.get_masked_triangles())
 
 
 def _mid_slice(d: SheetData) -> tuple[Any, np.ndarray, np.ndarray]:
