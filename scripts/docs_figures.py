@@ -6,8 +6,8 @@
 
 From RESULTS (default ``results``, the demo's): the 3-D atlas figures of docs/guide/figures.md
 (mean shape, shape mode 1, mean U, p and WSS, WSS mode 1), one flat (tau, theta) map and the QC
-sheet of one patient (default: the first in the atlas). Each is re-encoded as a palette PNG (a few
-tens of kB instead of hundreds) under docs/figures/ (``--prefix real_`` for a real cohort's run).
+sheet of one patient (default: the first in the atlas), as lossless PNGs under docs/figures/ (the
+QC sheet scaled to 1100 pixels wide; ``--prefix real_`` for a real cohort's run).
 Prints what it wrote and the total size.
 """
 
@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+QC_WIDTH = 1100  # pixels: a QC sheet is 1440 wide
 ATLAS_FIGURES = (
     "shape_mean_3d",
     "shape_mode1_3d",
@@ -30,11 +31,15 @@ ATLAS_FIGURES = (
 )
 
 
-def palette_png(src: Path, dst: Path, colours: int = 128) -> None:
-    """``src`` re-encoded as a palette PNG (median-cut, ``colours`` entries)."""
+def copy_png(src: Path, dst: Path, *, width: int | None = None) -> None:
+    """``src`` as a lossless, optimised PNG (a palette would band the colour bars), scaled down to
+    ``width`` pixels (Lanczos) when it is wider."""
     from PIL import Image
 
-    Image.open(src).convert("RGB").quantize(colours, method=Image.Quantize.MEDIANCUT).save(dst, optimize=True)
+    im = Image.open(src).convert("RGB")
+    if width and im.width > width:
+        im = im.resize((width, round(im.height * width / im.width)), Image.Resampling.LANCZOS)
+    im.save(dst, optimize=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     total = 0
     for name, src in sources.items():
         dst = args.out / f"{args.prefix}{name}.png"
-        palette_png(src, dst)
+        copy_png(src, dst, width=QC_WIDTH if name == "qc" else None)
         total += dst.stat().st_size
         shown = dst.relative_to(REPO) if dst.is_relative_to(REPO) else dst
         print(f"{dst.stat().st_size / 1e3:6.0f} kB  {shown}  <- {src}")
