@@ -119,3 +119,44 @@ def test_a_patient_whose_mesh_failed_gets_its_fit_panels_and_key_numbers(fitted,
     drawn = write_qc_sheet(files, tmp_path / "qc.png")
     assert drawn["verdict"] == "drawn" and all(drawn[p] == "drawn" for p in FIT_PANELS), drawn
     assert not any(v.startswith("could not draw") for v in drawn.values()), drawn
+
+
+@pytest.mark.parametrize("stationary", [True, False])
+def test_the_transient_verdict_figure_shows_every_judged_quantity(tmp_path, monkeypatch, caplog, stationary):
+    """transient.png (embedded in the QC sheet of a transient run): one row per quantity the
+    verdict judged (dp, area-mean |WSS|, probe |U|), drawn from the run's records."""
+    from matplotlib.image import imread
+
+    import vcs.cfd.transient as tr
+
+    t = np.linspace(1.0, 3.0, 400)
+    rng = np.random.default_rng(0)
+    rec = {
+        "t": t,
+        "dp": 0.02 + 0.002 * np.sin(9 * t) + 1e-4 * rng.standard_normal(t.size),
+        "tawss": 1e-3 * (1 + 0.1 * np.cos(7 * t)),
+        "U": 0.3 + 0.01 * rng.standard_normal((t.size, 6)),  # two probe cells, 3 components
+    }
+    monkeypatch.setattr(tr, "_records", lambda *a, **k: rec)
+    state = {"cfd": {"physics": {"rho": 1060.0}}}
+    plan = {"start_time": 1.0, "averaging_start_time": 1.5, "flow_through_time_s": 0.5}
+    rel = {"inlet_minus_outlet_pressure": 0.01, "tawss_mean": 0.02, "U": 0.05 if stationary else 0.4}
+    verdict = {
+        "window_s": 1.5,
+        "confidence": 0.95,
+        "stationary": stationary,
+        "relative_errors": rel,
+        "tolerances": {"inlet_minus_outlet_pressure": 0.03, "tawss_mean": 0.03, "U": 0.2},
+        "statistics": {
+            "inlet_minus_outlet_pressure": {"mean_Pa": 21.2, "half_width_Pa": 0.2},
+            "tawss_mean": {"mean_Pa": 1.06, "half_width_Pa": 0.02},
+            "U": {"relative": rel["U"]},
+        },
+    }
+    with caplog.at_level("WARNING"):
+        tr._plot_transient(tmp_path, state, plan, verdict)
+    assert not caplog.records, caplog.text
+    img = imread(tmp_path / "transient.png")[..., :3]
+    assert img.shape[0] > 2.5 * 230  # three rows of ~230 px, not the one-row figure
+    ink = (img.max(axis=2) - img.min(axis=2) > 0.2).mean()
+    assert ink > 0.01  # curves and bands drawn

@@ -10,6 +10,7 @@ set pimpleFoam's Courant-limited step for the whole lumen.
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 import time
@@ -27,6 +28,8 @@ from vcs.cfd.status import _log_summary, _wall_faces
 from vcs.cfd.steady import STAGE_FILES, request_write_now
 from vcs.cfd.timeseries import mean_error, mser_truncation, uniform_record
 from vcs.cfd.utilities import Stop, _fmt_time, _Runner, _solver_failure, _time_dirs, progress
+
+log = logging.getLogger(__name__)
 
 N_PROBES = 64
 """Cells whose velocity is recorded at every time step (drawn by volume: the root mean square over
@@ -814,8 +817,10 @@ def _record_verdict(
 
 
 def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any], verdict: dict[str, Any]) -> None:
-    """``transient.png``: the inlet-outlet pressure difference over the transient run, its running
-    mean over the averaging window and the final mean with its error bar (best effort, never fails)."""
+    """``transient.png``: each quantity the verdict judged (inlet-outlet pressure difference, the
+    wall's area-mean |WSS|, the probe cells' mean |U|) over the transient run, its running mean
+    over the averaging window, the final mean with its error bar, and in each title its relative
+    error against the tolerance; the verdict in the figure's title (best effort, never fails)."""
     try:
         import matplotlib
 
@@ -826,25 +831,44 @@ def _plot_transient(case_dir: Path, state: dict[str, Any], plan: dict[str, Any],
         rec = _records(case_dir, state, plan["start_time"], plan["start_time"] + 1e9)
         t = rec["t"] - plan["start_time"]
         t_w = plan["averaging_start_time"] - plan["start_time"]
-        fig, ax = plt.subplots(figsize=(7, 4))
-        ax.plot(t, rec["dp"] * rho, lw=0.5, label="instantaneous")
         sel = t > t_w
-        if sel.sum() > 1:
-            w = np.diff(np.concatenate([[t_w], t[sel]]))
-            run_mean = np.cumsum(w * rec["dp"][sel]) / np.cumsum(w) * rho
-            ax.plot(t[sel], run_mean, "k", lw=1.2, label="running mean")
-            s = verdict["statistics"]["inlet_minus_outlet_pressure"]
-            m, hw = s["mean_Pa"], s["half_width_Pa"]
-            if np.isfinite(hw):
-                ax.axhspan(m - hw, m + hw, xmin=0, xmax=1, color="k", alpha=0.15,
-                           label=f"mean +- {100 * verdict['confidence']:g} % interval")  # fmt: skip
-        ax.axvspan(t_w, t[-1], alpha=0.08, label="averaging window")
-        ax.set_xlabel(f"time since the end of SIMPLE [s] (flow-through time {plan['flow_through_time_s']:.3g} s)")
-        ax.set_ylabel("p(inlet) - p(outlet) [Pa]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
+        rel, tols, stats = verdict["relative_errors"], verdict["tolerances"], verdict["statistics"]
+        rows = [("inlet_minus_outlet_pressure", rec["dp"] * rho, "p(inlet) - p(outlet) [Pa]")]
+        rows.append(("tawss_mean", rec["tawss"] * rho, "area-mean |WSS| [Pa]"))
+        if rec["U"] is not None:
+            u = np.asarray(rec["U"], float)
+            speed = np.linalg.norm(u.reshape(len(u), -1, 3), axis=2).mean(axis=1)
+            rows.append(("U", speed, "probe cells' mean |U| [m/s]"))
+        fig, axes = plt.subplots(len(rows), 1, figsize=(7, 2.3 * len(rows) + 0.8), sharex=True, squeeze=False)
+        for ax, (key, y, label) in zip(axes[:, 0], rows, strict=True):
+            ax.plot(t, y, lw=0.5, label="instantaneous")
+            if sel.sum() > 1:
+                w = np.diff(np.concatenate([[t_w], t[sel]]))
+                ax.plot(t[sel], np.cumsum(w * y[sel]) / np.cumsum(w), "k", lw=1.2, label="running mean")
+            s = stats.get(key) or {}
+            if np.isfinite(s.get("half_width_Pa", np.nan)):
+                m, hw = s["mean_Pa"], s["half_width_Pa"]
+                ax.axhspan(
+                    m - hw, m + hw, color="k", alpha=0.15, label=f"mean +- {100 * verdict['confidence']:g} % interval"
+                )
+            ax.axvspan(t_w, t[-1], alpha=0.08, label="averaging window")
+            known = rel.get(key, np.inf) <= tols.get(key, 0.0)
+            ax.set_title(
+                f"{_WORDS[key]}: +-{_pct(rel.get(key, np.inf))} (tolerance {100 * tols.get(key, np.nan):g} %)"
+                + ("" if known else " - not known"),
+                fontsize=9,
+                color="black" if known else "#b2182b",
+            )
+            ax.set_ylabel(label, fontsize=8)
+            ax.grid(True, alpha=0.3)
+        axes[0, 0].legend(loc="best", fontsize=7)
+        axes[-1, 0].set_xlabel(
+            f"time since the end of SIMPLE [s] (flow-through time {plan['flow_through_time_s']:.3g} s)"
+        )
+        head = "every mean known to its tolerance: stationary" if verdict["stationary"] else "NOT stationary"
+        fig.suptitle(f"transient window of {verdict['window_s']:.3g} s: {head}", fontsize=10)
         fig.tight_layout()
         fig.savefig(case_dir / "transient.png", dpi=100)
         plt.close(fig)
     except Exception:  # noqa: BLE001 - plotting must never fail a run
-        pass
+        log.warning("transient.png not drawn", exc_info=True)
