@@ -89,9 +89,11 @@ def test_every_figure_is_written_and_not_blank(figures):
     for name, img in images.items():
         assert foreground(img).mean() > 0.03, name
         assert coloured(img).mean() > 0.01, name
-    for f in ("U", "p", "WSS"):
-        lims = {tuple(written["colour_limits"][k]) for k in written["colour_limits"] if k.startswith(f"flow_{f}_")}
-        assert len(lims) == 1, lims  # one colour scale for every figure of a field
+    for f in ("U", "p", "WSS"):  # one colour scale for the mode figures of a field; the mean its own
+        lims = {tuple(written["colour_limits"][k]) for k in written["colour_limits"] if k.startswith(f"flow_{f}_mode")}
+        assert len(lims) == 1, lims
+        mean = written["colour_limits"][f"flow_{f}_mean_3d"]
+        assert lims.pop()[0] <= mean[0] < mean[1]  # inside the modes' (mean +- 2 sigma reach further)
 
 
 @pytest.mark.parametrize(

@@ -860,8 +860,7 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
     """Colour limits shared by every figure of one flow field (3-D and flat, its mean and each
     mode): the widest of the figures' own :func:`robust_limits` (2nd-98th percentile of a mode's
     mean - 2 sigma, mean and mean + 2 sigma values; magnitudes; of a wall field, its values on the
-    wall), widened by :data:`FIELD_LIMIT_PAD` of its width at either end (not below 0 when no
-    figure's 2nd percentile is negative). Each figure then has
+    wall), widened by :data:`FIELD_LIMIT_PAD` of its width at either end. Each figure then has
     less than 2 % of its values beyond either end, and the figures of a field can be compared
     colour for colour. ``panels`` is a field's entry of :func:`flow_grid`'s
     ``panels``."""
@@ -874,8 +873,18 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
     limits += [robust_limits([shown(minus), mean, shown(plus)]) for minus, plus, _ in panels["modes"]]
     lo, hi = min(lo for lo, _ in limits), max(hi for _, hi in limits)
     pad = FIELD_LIMIT_PAD * (hi - lo)  # the extreme cells, often facing a 3-D view, not at the end colours
-    # a quantity whose figures show no negative values (a magnitude, OSI) starts at 0, not at -0.0
-    return (lo - pad if lo < 0 else max(lo - pad, 0.0)), hi + pad
+    return lo - pad, hi + pad
+
+
+def mean_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
+    """Colour limits of a flow field's mean figure alone: :func:`robust_limits` of the mean
+    (magnitudes; of a wall field, its values on the wall) widened by :data:`FIELD_LIMIT_PAD` at
+    either end. The modes' +-2 sigma panels of a varied cohort reach far beyond the mean; on
+    :func:`field_limits` the mean would use a small part of the colour map."""
+    mean = _scalar(panels["mean"])[:, :, -1] if on_wall else _scalar(panels["mean"])
+    lo, hi = robust_limits([mean])
+    pad = FIELD_LIMIT_PAD * (hi - lo)
+    return lo - pad, hi + pad
 
 
 def write_flow_files(

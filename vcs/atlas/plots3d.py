@@ -24,9 +24,10 @@ Figures (PNG, written by :func:`write_3d_figures`; ``{field}`` a :func:`vcs.atla
   only: 27 renders fewer for 3 phases and 3 modes).
 
 The clipped lumen is the measurement grid with the half of its theta range that faces the camera
-removed (:func:`facing_half`), so the cut shows the field inside. All the figures of one field
+removed (:func:`facing_half`), so the cut shows the field inside. The mode figures of one field
 share its colour limits (:func:`vcs.atlas.plots.field_limits`: the widest of the figures' 2nd-98th
-percentiles); NaN (wall cells left out of a PCA, e.g. at an ostium) is drawn grey.
+percentiles), the mean figure has its own (:func:`vcs.atlas.plots.mean_limits`: readable when a
+varied cohort's modes reach far); NaN (wall cells left out of a PCA, e.g. at an ostium) is grey.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from vcs.atlas.pca import field_phase, field_quantity, field_slug, is_vector_fie
 from vcs.atlas.plots import (
     BAR_HEIGHT,
     BAR_Y,
+    FIELD_LIMIT_PAD,
     LABEL_FONT_PX,
     LEFT_OUT_NOTE,
     NAN_COLOUR,
@@ -55,6 +57,7 @@ from vcs.atlas.plots import (
     field_label,
     field_limits,
     field_title,
+    mean_limits,
     robust_limits,
 )
 from vcs.grid import grid_to_vtk
@@ -294,7 +297,8 @@ def shape_mean_png(mean: VesselModel, frame: ViewFrame, path: PathLike) -> tuple
     T, TH = np.meshgrid(np.linspace(0, 1, n[0]), 2 * np.pi * np.arange(n[1]) / n[1], indexing="ij")
     rho = np.asarray(mean.fitted_wall()(T, TH), float)
     lo, hi = robust_limits([rho])
-    half = max(0.5 * (hi - lo), 0.01 * float(np.mean(rho)))  # a tube: one colour, not round-off noise
+    # padded as the flow fields (FIELD_LIMIT_PAD): the widest sections not all at the end colour
+    half = max((0.5 + FIELD_LIMIT_PAD) * (hi - lo), 0.01 * float(np.mean(rho)))  # a tube: one colour
     clim = (0.5 * (lo + hi) - half, 0.5 * (lo + hi) + half)
     wall = wall_polydata(mean, {"rho_w": rho}, n=n)
     look = coloured("rho_w", clim, "viridis")
@@ -537,7 +541,8 @@ def write_3d_figures(
             on_wall = len(shape) - (1 if is_vector_field(f) else 0) == 2
             clim = field_limits(panels, on_wall=on_wall)
             slug = field_slug(f)
-            mean_job = partial(flow_mean_png, f, panels, pts, mean_model, frame, on_wall=on_wall, clim=clim)
+            mean_clim = mean_limits(panels, on_wall=on_wall)  # the mean's own: readable next to wide modes
+            mean_job = partial(flow_mean_png, f, panels, pts, mean_model, frame, on_wall=on_wall, clim=mean_clim)
             jobs.append((f"flow_{slug}_mean_3d", mean_job))
             for k in range(0 if field_phase(f) else len(panels["modes"])):  # a phase's modes: flat maps only
                 share = 100 * float(atlas.flow[f].explained_variance_ratio[k])
