@@ -77,6 +77,9 @@ log = logging.getLogger(__name__)
 COLOUR_PERCENTILES = (2.0, 98.0)
 #: Margin added to a flow field's colour range at either end (fraction of its width): :func:`field_limits`.
 FIELD_LIMIT_PAD = 0.05
+#: Percentiles of a mean figure's own colour limits (:func:`mean_limits`): one field, no modes, its
+#: peak (p on an arch's outer curve) is a large part of the picture.
+MEAN_PERCENTILES = (1.0, 99.0)
 #: Width of a label character relative to the font size (digits, '-', '.' of VTK's Arial: ~0.55).
 _CHAR_WIDTH = 0.6
 PANEL_PX = (420, 520)  # width, height of one panel of a clipped view
@@ -877,12 +880,15 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
 
 
 def mean_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
-    """Colour limits of a flow field's mean figure alone: :func:`robust_limits` of the mean
-    (magnitudes; of a wall field, its values on the wall) widened by :data:`FIELD_LIMIT_PAD` at
+    """Colour limits of a flow field's mean figure alone: the :data:`MEAN_PERCENTILES` of the mean
+    (magnitudes; of a wall field, its values on the wall; of a volume field, its values with its
+    wall layer counted twice) widened by :data:`FIELD_LIMIT_PAD` at
     either end. The modes' +-2 sigma panels of a varied cohort reach far beyond the mean; on
     :func:`field_limits` the mean would use a small part of the colour map."""
-    mean = _scalar(panels["mean"])[:, :, -1] if on_wall else _scalar(panels["mean"])
-    lo, hi = robust_limits([mean])
+    mean = _scalar(panels["mean"])
+    # a wall field: its wall values; a volume field: its values, its wall values once more (the
+    # figures show the wall, where p peaks on an arch's outer curve, as much as the cut)
+    lo, hi = robust_limits([mean[:, :, -1]] if on_wall else [mean, mean[:, :, -1]], MEAN_PERCENTILES)
     pad = FIELD_LIMIT_PAD * (hi - lo)
     return lo - pad, hi + pad
 
