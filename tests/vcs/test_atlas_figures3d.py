@@ -12,14 +12,10 @@ import pytest
 from test_atlas_ostium import cohort, with_ostium
 
 from vcs.atlas import compute_atlas
+from vcs.atlas.figure_checks import coloured, end_fractions, foreground, panel
 from vcs.vessel import VesselModel
 
 pv = pytest.importorskip("pyvista")
-
-#: A pixel is coloured when its largest and smallest channel differ by more (0-255 scale).
-CHROMA = 40
-#: Share of the colour map's 256 entries that counts as "at an end of the scale".
-END_ENTRIES = 3
 
 
 @pytest.fixture(scope="module")
@@ -45,40 +41,6 @@ def figures(tmp_path_factory):
     written = write_3d_figures(atlas, mean, out)
     images = {k: (255 * imread(v)[..., :3]).round().astype(np.uint8) for k, v in written["files"].items()}
     return images, written, atlas, mean
-
-
-def panel(img: np.ndarray, i: int, n_cols: int, n_rows: int = 1) -> np.ndarray:
-    """Panel i (row-major) of a figure of n_rows x n_cols equal panels."""
-    h, w = img.shape[0] // n_rows, img.shape[1] // n_cols
-    r, c = divmod(i, n_cols)
-    return img[r * h : (r + 1) * h, c * w : (c + 1) * w]
-
-
-def foreground(img: np.ndarray) -> np.ndarray:
-    """Pixels that are not the white background."""
-    return np.any(img < 250, axis=-1)
-
-
-def coloured(img: np.ndarray) -> np.ndarray:
-    """Pixels of a colour (not white, grey, black: background, text, NaN, ghost)."""
-    i = img.astype(int)
-    return i.max(axis=-1) - i.min(axis=-1) > CHROMA
-
-
-def end_fractions(img: np.ndarray, cmap: str, *, n: int = 8000) -> tuple[float, float]:
-    """Fractions of the coloured pixels drawn in the lowest / highest END_ENTRIES of the colour
-    map's 256 entries: each pixel is matched to the entry it is a shade of (lighting only scales
-    a colour: the entry c minimising |p - s c| over s in [0.3, 1.05])."""
-    from matplotlib import colormaps
-
-    lut = colormaps[cmap](np.linspace(0.0, 1.0, 256))[:, :3].astype(np.float32) * 255
-    px = img[coloured(img)].astype(np.float32)
-    assert len(px) > 200, "no coloured pixels"
-    px = px[np.random.default_rng(0).choice(len(px), min(n, len(px)), replace=False)]
-    s = np.clip(px @ lut.T / np.sum(lut**2, axis=1), 0.3, 1.05)  # (n, 256)
-    err = np.sum((px[:, None, :] - s[..., None] * lut[None]) ** 2, axis=-1)
-    idx = np.argmin(err, axis=1)
-    return float(np.mean(idx < END_ENTRIES)), float(np.mean(idx >= 256 - END_ENTRIES))
 
 
 def test_every_figure_is_written_and_not_blank(figures):
