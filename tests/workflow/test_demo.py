@@ -73,6 +73,19 @@ def test_ci_cohort_end_to_end_and_a_failing_patient_is_excluded(tmp_path, workdi
         rf"^vcs-atlas: 1 of 4 patients not in the atlas .*: {broken} at mesh \(not converged: blockMesh", out, re.M
     )
 
+    # the QC sheets: every panel of a converged patient drawn; the broken patient's fit panels
+    # drawn, its CFD panels said missing (its blockMesh failed), nothing that could not be drawn
+    for pid in IDS:
+        lines = (res / "logs" / "patient_qc" / f"{pid}.log").read_text().splitlines()
+        panels = dict(
+            line.split("INFO patient_qc: ", 1)[1].split(": ", 1) for line in lines if "INFO patient_qc: " in line
+        )
+        assert len(panels) == 9 and not any(v.startswith("could not draw") for v in panels.values()), (pid, panels)
+        if pid != broken:
+            assert set(panels.values()) == {"drawn"}, (pid, panels)
+    assert panels["fit_overlay"] == panels["verdict"] == "drawn", panels  # the broken patient (last)
+    assert panels["mesh_slice"].startswith("not available"), panels
+
     r = wd.snakemake("--report", str(res / "report.html"))
     assert (res / "report.html").stat().st_size > 10_000, r.stderr
     # every figure in the report, captioned and not blank; the excluded patient in the cohort table

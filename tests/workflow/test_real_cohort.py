@@ -89,3 +89,20 @@ def test_real_cohort_meshed_converged_and_in_the_atlas(tmp_path, workdir_factory
     atlas = json.loads((res / "atlas" / "atlas.json").read_text())
     assert sorted(atlas["patients_included"]) == ids and atlas["patients_excluded"] == []
     assert (res / "atlas" / "complete.txt").is_file()
+    # the figures a reader judges (issue 26): each 3-D atlas figure coloured, its colour range not
+    # saturated (< 5 % of its coloured pixels at either end of the map), and a QC sheet per patient
+    from matplotlib.image import imread
+
+    from vcs.atlas.figure_checks import figure_end_fractions, figure_layout
+
+    shares = {}
+    for png in sorted((res / "atlas" / "figures").glob("*_3d.png")):
+        layout = figure_layout(png.stem)
+        assert layout is not None, png
+        shares[png.stem] = figure_end_fractions((255 * imread(png)[..., :3]).round().astype("uint8"), layout)
+    assert {"shape_mean_3d", "flow_WSS_mean_3d", "flow_U_mode1_3d"} <= set(shares), sorted(shares)
+    assert all(max(lo, hi) < 0.05 for lo, hi in shares.values()), shares
+    for pid in ids:
+        assert (res / "patients" / pid / "qc.png").stat().st_size > 50_000, pid
+        qc_log = (res / "logs" / "patient_qc" / f"{pid}.log").read_text()
+        assert qc_log.count(": drawn") == 9, qc_log[-2000:]  # every panel of a converged patient
