@@ -6,7 +6,7 @@ patient1 at its default ``auto`` cell size, not the sheet's 1.0 mm, plus the Sim
 segment and the vmtk bifurcation) and, with ``--demo N``, the first N demo aortas, through the
 whole workflow with config/config.yaml; then one row per patient.
 
-    .venv/bin/python bench/cfd_cost.py [-d DIR] [--cores 2] [--demo 8] [--skip id,id]
+    .venv/bin/python bench/cfd_cost.py [-d DIR] [--cores 2] [--demo 8] [--skip id,id] [--json PATH]
 
 DIR (default: a temporary folder) is the Snakemake working directory; a finished DIR is only
 re-read. Per patient: cells, the CFD verdict (criterion; for a time average its window in
@@ -14,6 +14,8 @@ flow-through times and the 95 % half-widths of dp / mean TAWSS / U), SIMPLE iter
 pimpleFoam time steps, the time step, OpenFOAM CPU s (the solvers' ExecutionTime plus the other
 utilities' wall time), the patient's CPU s and wall s over all its workflow jobs (Snakemake's
 benchmark files: ``cpu_time``, ``s``); then the run's wall time, the machine and its load.
+``--json PATH`` also writes the table in the docs' format (docs/data/bench/cfd_cost.json: SIMPLE
+iterations without the time steps, no time step column).
 """
 
 from __future__ import annotations
@@ -62,11 +64,42 @@ def verdict(st: dict) -> str:
     return f"time average, {tr['window_flow_throughs']:.2g} FT window (+- {bars} %)"
 
 
-def row(res: Path, pid: str) -> str:
+#: the table's columns as printed
+COLUMNS = [
+    "patient",
+    "cells",
+    "verdict (95 % half-widths dp / TAWSS / U)",
+    "SIMPLE iterations / time steps",
+    "dt ms",
+    "OpenFOAM CPU s",
+    "patient CPU s",
+    "patient wall s",
+]
+#: the docs JSON's columns
+JSON_COLUMNS = [
+    "patient",
+    "cells",
+    "verdict",
+    "SIMPLE iterations",
+    "OpenFOAM CPU s",
+    "Python CPU s (workflow jobs)",
+    "patient wall s",
+]
+
+
+def json_cells(c: list[str]) -> list[str]:
+    """A row of :data:`COLUMNS` as one of :data:`JSON_COLUMNS`."""
+    if len(c) < len(COLUMNS):  # no status.json
+        return c + ["-"] * (len(JSON_COLUMNS) - len(c))
+    return [c[0], c[1], c[2], c[3].split(" / ")[0], c[5], c[6], c[7]]
+
+
+def cells(res: Path, pid: str) -> list[str]:
+    """One row's cells, in the order of :data:`COLUMNS` (a patient without status.json: two)."""
     p = res / "patients" / pid
     f = p / "status.json"
     if not f.exists():
-        return f"| {pid} | no status.json |"
+        return [pid, "no status.json"]
     st = json.loads(f.read_text())
     tr = st.get("transient") or {}
     steps = sum((tr.get("time_steps") or {}).values())
@@ -77,10 +110,16 @@ def row(res: Path, pid: str) -> str:
         v for k, v in t.items() if k != "total" and not k.startswith(("simpleFoam", "pimpleFoam", "inletProfile"))
     )
     cpu, wall = job_totals(res, pid)
-    return (
-        f"| {pid} | {st.get('cells') or 0:,} | {verdict(st)} | {st.get('iterations', 0):,} / {steps:,} | {dts} | "
-        f"{foam:.0f} | {cpu:.0f} | {wall:.0f} |"
-    )
+    return [
+        pid,
+        f"{st.get('cells') or 0:,}",
+        verdict(st),
+        f"{st.get('iterations', 0):,} / {steps:,}",
+        dts,
+        f"{foam:.0f}",
+        f"{cpu:.0f}",
+        f"{wall:.0f}",
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cores", type=int, default=2, help="cores for Snakemake (default 2)")
     ap.add_argument("--demo", type=int, default=0, help="also the first N demo aortas (default 0)")
     ap.add_argument("--skip", default="", help="comma-separated patient ids to leave out")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     if not (REPO.parent / "shared" / "data").is_dir():
         print(f"cfd_cost: error: {REPO.parent / 'shared' / 'data'} is absent", file=sys.stderr)
@@ -100,13 +140,22 @@ def main(argv: list[str] | None = None) -> int:
         ids = write_rows(wd / "patients.tsv", [r for r in sheet_rows(a.demo) if r["id"] not in skip])
         run_workflow(wd, ["config.yaml"], "patients.tsv", a.cores, "shared real vessels, default config")
         res = wd / "results"
-        print(
-            "| patient | cells | verdict (95 % half-widths dp / TAWSS / U) | SIMPLE iterations / time steps | dt ms "
-            "| OpenFOAM CPU s | patient CPU s | patient wall s |"
-        )
+        print("| " + " | ".join(COLUMNS) + " |")
         print("|---" * 8 + "|")
+        rows = []
         for pid in ids:
-            print(row(res, pid))
+            rows.append(cells(res, pid))
+            print("| " + " | ".join(rows[-1]) + " |")
+        if a.json:
+            from _table import command_line, write_table
+
+            write_table(
+                a.json,
+                command=command_line(),
+                measured=f"one run, default config/config.yaml, {a.cores} cores for Snakemake",
+                columns=JSON_COLUMNS,
+                rows=[json_cells(c) for c in rows],
+            )
         atlas = res / "atlas" / "atlas.json"
         if atlas.exists():
             at = json.loads(atlas.read_text())

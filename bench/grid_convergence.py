@@ -4,6 +4,7 @@ and the grid convergence index (GCI) of Celik et al. 2008, J. Fluids Eng. 130:07
 
     .venv/bin/python bench/grid_convergence.py [-o results/verification] [--fine 1.0e-3]
                                                [--ratio 1.5] [--ranks 2] [--seed 0] [--layers 0]
+                                               [--json PATH]
 
 Three meshes of the same Eq. 8 wall (demo aorta phantom, seed 0, fitted with the default VCS
 settings), refined systematically: the background cell size is h_fine * ratio^k (k = 2, 1, 0) and
@@ -22,7 +23,8 @@ the (tau, theta) grid. Then, per quantity, the observed order p (fixed-point ite
 Eqs. 4-6), the extrapolated value (Eq. 7), the approximate and extrapolated relative errors and
 GCI_fine = 1.25 e_a / (r^p - 1) (Eqs. 8-10). Writes OUT/grid_convergence.json (keys ``cells``,
 ``h``, ``pressure_drop_Pa``, ``wss_mean_Pa``, ``wss_p95_Pa``, ``observed_order``, ``gci_fine``, ...)
-and OUT/grid_convergence.png; prints a table. ~10-20 min on 2 cores at the defaults.
+and OUT/grid_convergence.png; prints a table. ~10-20 min on 2 cores at the defaults. ``--json PATH``
+also writes the table in the docs' format (docs/data/bench/grid_convergence.json).
 """
 
 from __future__ import annotations
@@ -47,6 +49,12 @@ from vcs.vessel import fit_vessel
 
 REPO = Path(__file__).resolve().parents[1]
 QUANTITIES = ("pressure_drop_Pa", "wss_mean_Pa", "wss_p95_Pa")
+#: each quantity's row label in the docs JSON
+LABELS = {
+    "pressure_drop_Pa": "pressure difference inlet - outlet (Pa)",
+    "wss_mean_Pa": "mean WSS (Pa)",
+    "wss_p95_Pa": "p95 WSS (Pa)",
+}
 
 
 def observed_order(f1: float, f2: float, f3: float, r21: float, r32: float) -> tuple[float, float]:
@@ -200,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         help="keep the cases here (default: a temporary folder); solved cases found there are reused",
     )
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     if a.ratio < 1.3:
         print(f"grid_convergence: error: --ratio {a.ratio} is below 1.3 (Celik et al. 2008)", file=sys.stderr)
@@ -258,6 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     plot(a.output, grids, result)
     print("| quantity | fine | medium | coarse | observed order | extrapolated | GCI fine |")
     print("|---|---|---|---|---|---|---|")
+    rows = []
     for q in QUANTITIES:
         r = quantities[q]
         gci_text = f"{100 * r['gci_fine']:.2f} %" if r["gci_fine"] is not None else "n/a"
@@ -265,6 +275,18 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"| {q} | {grids[0][q]:.4g} | {grids[1][q]:.4g} | {grids[2][q]:.4g} | {r['observed_order']:.2f} | "
             f"{ext} | {gci_text} |"
+        )
+        rows.append([LABELS[q], *(f"{g[q]:.4g}" for g in grids), f"{r['observed_order']:.2f}", ext, gci_text])
+    if a.json:
+        from _table import command_line, write_table
+
+        heads = [f"{g['background_cell_mm']:.3g} mm ({g['cells']:,})" for g in grids]
+        write_table(
+            a.json,
+            command=command_line(),
+            measured=f"one run, {result['total_time_s']:.0f} s wall; also in {a.output / 'grid_convergence.json'}",
+            columns=["quantity", heads[0][:-1] + " cells)", *heads[1:], "observed order", "Richardson", "GCI fine"],
+            rows=rows,
         )
     print(f"cells {result['cells']}; total {result['total_time_s']:.0f} s -> {a.output / 'grid_convergence.json'}")
     return 0

@@ -4,7 +4,7 @@ steady SIMPLE then the transient time average over 10 flow-through times, on fou
 through the whole workflow, then one row per patient from its status.json and the workflow's
 benchmark files, and the atlas's field sources and explained variances.
 
-    .venv/bin/python bench/jet_atlas.py [-d DIR] [--cores 2]
+    .venv/bin/python bench/jet_atlas.py [-d DIR] [--cores 2] [--json PATH]
 
 Needs OpenFOAM; ~3 hours on 2 cores (5.4 CPU hours of solver) (README, "An atlas of jet patients"). DIR (default: a
 temporary folder) is the Snakemake working directory; a finished DIR is only re-read. Prints, per
@@ -12,7 +12,8 @@ patient: cells, jet cells across, layer coverage, SIMPLE iterations, flow-throug
 window, pimpleFoam time steps and their size, the relative error bars (95 % half-widths) of the
 window means, the window means (inlet - outlet pressure, TAWSS, OSI), CPU hours of the solvers (their
 logs' ExecutionTime), the patient's wall time (the five workflow jobs) and the verdict; then the
-atlas. A patient that failed gets '-' where it has no figure and its reason.
+atlas. A patient that failed gets '-' where it has no figure and its reason. ``--json PATH`` also
+writes the table in the docs' format (docs/data/bench/jet_atlas.json).
 """
 
 from __future__ import annotations
@@ -28,6 +29,26 @@ from real_cohort import job_seconds, run_workflow  # bench/ is on sys.path when 
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = ("config.yaml", "paper.yaml", "paper_atlas.yaml")
+NO_STATUS = "no status.json (the run stopped before the solver)"
+#: the table's columns (as printed and in the docs JSON)
+COLUMNS = [
+    "patient",
+    "cells",
+    "jet cells across",
+    "layer coverage",
+    "SIMPLE iterations",
+    "flow-through s",
+    "wash-out + window s",
+    "time steps",
+    "dt ms",
+    "95 % half-widths % (dp / TAWSS / U)",
+    "inlet - outlet pressure Pa",
+    "TAWSS mean / max Pa",
+    "OSI mean",
+    "solver CPU h",
+    "patient wall min",
+    "converged",
+]
 
 
 def solver_cpu_s(case: Path) -> float:
@@ -47,9 +68,16 @@ def solver_cpu_s(case: Path) -> float:
 
 def row(res: Path, pid: str) -> str:
     """One table row from the patient's status.json, logs and benchmark files ('-' where absent)."""
+    c = cells(res, pid)
+    return "| " + " | ".join(c[:2] if c[1] == NO_STATUS else c) + " |"
+
+
+def cells(res: Path, pid: str) -> list[str]:
+    """:func:`row`'s cells, in the order of :data:`COLUMNS` (a patient without status.json: its
+    reason, then '-')."""
     f = res / "patients" / pid / "status.json"
     if not f.exists():
-        return f"| {pid} | no status.json (the run stopped before the solver) |"
+        return [pid, NO_STATUS] + ["-"] * (len(COLUMNS) - 2)
     st = json.loads(f.read_text())
     m, tr = st.get("mesh") or {}, st.get("transient") or {}
     try:
@@ -72,20 +100,31 @@ def row(res: Path, pid: str) -> str:
         return "-" if not isinstance(v, (int, float)) else format(v, fmt)
 
     dts = "-" if dt.get("min") is None else f"{1e3 * dt['min']:.2g}-{1e3 * dt['max']:.2g}"
-    return (
-        f"| {pid} | {num(st.get('cells'), ',')} | {num(jet.get('cells_across'), '.1f')} | "
-        f"{num((m.get('layers') or {}).get('coverage'), '.2f')} | {num(st.get('iterations'), ',')} | "
-        f"{num(tr.get('flow_through_time_s'), '.3g')} | {window} | {num(sum(steps.values()), ',')} | {dts} | "
-        f"{halves or '-'} | {num(dp, '.1f')} | {num(tawss.get('mean'), '.3g')} / {num(tawss.get('max'), '.3g')} | "
-        f"{num(osi.get('mean'), '.2g')} | {cpu_h:.2f} | {wall_min} | "
-        f"{st.get('criterion_used') if st.get('converged') else 'NO: ' + str(st.get('reason'))} |"
-    )
+    return [
+        pid,
+        num(st.get("cells"), ","),
+        num(jet.get("cells_across"), ".1f"),
+        num((m.get("layers") or {}).get("coverage"), ".2f"),
+        num(st.get("iterations"), ","),
+        num(tr.get("flow_through_time_s"), ".3g"),
+        window,
+        num(sum(steps.values()), ","),
+        dts,
+        halves or "-",
+        num(dp, ".1f"),
+        f"{num(tawss.get('mean'), '.3g')} / {num(tawss.get('max'), '.3g')}",
+        num(osi.get("mean"), ".2g"),
+        f"{cpu_h:.2f}",
+        wall_min,
+        str(st.get("criterion_used")) if st.get("converged") else "NO: " + str(st.get("reason")),
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("-d", "--workdir", type=Path, help="Snakemake working directory (default: temporary)")
     ap.add_argument("--cores", type=int, default=2, help="cores for Snakemake (default 2)")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         wd = (a.workdir or Path(tmp)).resolve()
@@ -94,15 +133,20 @@ def main(argv: list[str] | None = None) -> int:
         ids = [r["id"] for r in csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t")]
         r = run_workflow(wd, list(CONFIGS), str(sheet), a.cores, f"jet atlas, {' + '.join(CONFIGS)}")
         res = wd / "results"
-        print(
-            "| patient | cells | jet cells across | layer coverage | SIMPLE iterations | flow-through s "
-            "| wash-out + window s | time steps | dt ms | 95 % half-widths % (dp / TAWSS / U) "
-            "| inlet - outlet pressure Pa | TAWSS mean / max Pa | OSI mean | solver CPU h | patient wall min "
-            "| converged |"
-        )
+        print("| " + " | ".join(COLUMNS) + " |")
         print("|---" * 16 + "|")
         for pid in ids:
             print(row(res, pid))
+        if a.json:
+            from _table import command_line, write_table
+
+            write_table(
+                a.json,
+                command=command_line(),
+                measured=f"one run, config/{' + config/'.join(CONFIGS)}, {a.cores} cores for Snakemake",
+                columns=COLUMNS,
+                rows=[cells(res, pid) for pid in ids],
+            )
         if not (res / "atlas" / "atlas.json").exists():
             print("atlas: none (fewer than 3 patients included: see the rows above, results/logs/atlas_build/)")
             return 1

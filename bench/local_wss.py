@@ -2,7 +2,7 @@
 """Local WSS accuracy on Hagen-Poiseuille flow: the resampled (tau, theta) wall map against
 4 mu U_mean / R node by node, with and without wall prism layers.
 
-    .venv/bin/python bench/local_wss.py [-o results/verification] [--workdir DIR]
+    .venv/bin/python bench/local_wss.py [-o results/verification] [--workdir DIR] [--json PATH]
 
 The tube of tests/workflow/test_openfoam.py (R = 10 mm, L = 120 mm, axis tilted ~2 degrees,
 Q = 2e-5 m3/s, Re = 378, parabolic inflow, 1.25 mm background cells, serial) meshed four ways:
@@ -14,7 +14,8 @@ snappyHexMesh and simpleFoam times, iterations, pressure drop between the sectio
 relative error of |WSS| on the 64 x 32 (tau, theta) map in the developed region
 (0.1 <= tau <= 0.9) and on the whole map, where the largest errors sit, and the same on the raw
 wall faces. Writes OUT/local_wss.json and OUT/local_wss.png (the error maps); prints a table.
-~3-5 min on 2 cores.
+~3-5 min on 2 cores. ``--json PATH`` also writes the table in the docs' format
+(docs/data/bench/local_wss.json: of the raw faces, the largest error and where it is).
 """
 
 from __future__ import annotations
@@ -53,6 +54,18 @@ VARIANTS: dict[str, tuple[dict, float]] = {
     "3 layers, 1 D inlet extension": ({}, 2 * R),
 }
 DEVELOPED = (0.1, 0.9)
+#: the docs JSON's columns
+JSON_COLUMNS = [
+    "mesh",
+    "cells",
+    "snappy s",
+    "simpleFoam s",
+    "pressure drop",
+    "mean WSS",
+    "map, developed: p5 / p95 / p95 of |e| / max |e|",
+    "whole map: p95 / max |e| (tau, theta)",
+    "raw wall faces: max (distance from the inlet cap, theta)",
+]
 
 
 def straight_model() -> VesselModel:
@@ -176,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("-o", "--output", type=Path, default=Path("results/verification"), help="output folder")
     ap.add_argument("--workdir", type=Path, help="keep the cases here and reuse finished ones (default: temporary)")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     a.output.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -197,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         "| whole map: p95 abs / max (at tau, theta) | raw faces: developed max / max (at s, theta) |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
+    rows = []
     for name, r in results.items():
         d, w = r["developed"], r["whole"]
         th = w["argmax"][1] * 360 / 32
@@ -207,6 +222,30 @@ def main(argv: list[str] | None = None) -> int:
             f"{100 * w['p95_abs']:.1f} / {100 * w['max_abs']:.1f} % ({w['argmax'][0]:.3f}, {th:.0f} deg) | "
             f"{100 * r['faces_developed_max']:.1f} / {100 * r['faces_max']:+.1f} % "
             f"({r['faces_max_at_mm_deg'][0]:.1f} mm, {r['faces_max_at_mm_deg'][1]:.0f} deg) |"
+        )
+        rows.append(
+            [
+                name,
+                f"{r['cells']:,}",
+                f"{r['snappyHexMesh_s']:.1f}",
+                f"{r['simpleFoam_s']:.1f}",
+                f"{100 * r['dp_rel_error']:+.2f} %",
+                f"{100 * r['wss_mean_rel_error']:+.2f} %",
+                f"{100 * d['p5']:+.1f} / {100 * d['p95']:+.1f} / {100 * d['p95_abs']:.1f} / {100 * d['max_abs']:.1f} %",
+                f"{100 * w['p95_abs']:.1f} / {100 * w['max_abs']:.1f} % ({w['argmax'][0]:.3f}, {th:.0f} deg)",
+                f"{100 * r['faces_max']:+.1f} % ({r['faces_max_at_mm_deg'][0]:.1f} mm, "
+                f"{r['faces_max_at_mm_deg'][1]:.0f} deg)",
+            ]
+        )
+    if a.json:
+        from _table import command_line, write_table
+
+        write_table(
+            a.json,
+            command=command_line(),
+            measured=f"one run, variants one after the other, serial; also in {a.output / 'local_wss.json'}",
+            columns=JSON_COLUMNS,
+            rows=rows,
         )
     return 0
 

@@ -3,14 +3,15 @@
 the whole workflow with the default config/config.yaml, then one row per patient from its
 status.json and the workflow's own benchmark files.
 
-    .venv/bin/python bench/real_cohort.py [-d DIR] [--cores 2]
+    .venv/bin/python bench/real_cohort.py [-d DIR] [--cores 2] [--json PATH]
 
 Needs ../shared/data beside the repository and OpenFOAM. DIR (default: a temporary folder) is the
 Snakemake working directory; a finished DIR is only re-read. Prints, per patient: cell size (and
 what set it), cells, wall / inlet / outlet faces, layer coverage, SIMPLE iterations and the
 convergence criterion, final residuals, inlet - outlet pressure, WSS mean / max, inflow, time per
 patient (the five workflow jobs, wall clock) and OpenFOAM solver seconds; then the whole run's wall
-time and the machine.
+time and the machine. ``--json PATH`` also writes the table without its "converged" column in the
+docs' format (docs/data/bench/real_cohort.json).
 """
 
 from __future__ import annotations
@@ -87,7 +88,25 @@ def job_seconds(res: Path, pid: str) -> float:
     )
 
 
-def row(res: Path, pid: str) -> str:
+#: the table's columns as printed; the docs JSON has all but the last
+COLUMNS = [
+    "vessel",
+    "cell mm (set by)",
+    "cells",
+    "wall / inlet / outlet faces",
+    "layer coverage",
+    "SIMPLE iterations (criterion)",
+    "final residuals p / U",
+    "inlet - outlet pressure Pa",
+    "WSS mean / max Pa",
+    "inflow L/min",
+    "time per patient s (solver s)",
+    "converged",
+]
+
+
+def cells(res: Path, pid: str) -> list[str]:
+    """One row's cells, in the order of :data:`COLUMNS`."""
     st = json.loads((res / "patients" / pid / "status.json").read_text())
     m, t = st["mesh"], st["timings_s"]
     size = m["sizing"]["cell_size"]
@@ -95,19 +114,27 @@ def row(res: Path, pid: str) -> str:
     solver_s = sum(v for k, v in t.items() if k.startswith(("simpleFoam", "pimpleFoam")))
     fr, wss = st["final_residuals"], st["wall_shear_stress_Pa"]
     faces = " / ".join(f"{m['patches'][k]['faces']:,}" for k in ("wall", "inlet", "outlet"))
-    return (
-        f"| {pid} | {size['cell_size_m'] * 1e3:.3g} ({size['governed_by']}) | {st['cells']:,} | {faces} | "
-        f"{m['layers'].get('coverage', 0):.2f} | {st['iterations']:,} ({st['criterion_used']}) | "
-        f"{fr['p']:.2g} / {fr['U']:.2g} | {st['inlet_minus_outlet_pressure']['Pa']:.1f} | "
-        f"{wss['mean']:.3g} / {wss['max']:.3g} | {st['inflow']['flow_rate_l_min']:.3g} | "
-        f"{job_s:.0f} ({solver_s:.0f}) | {'yes' if st['converged'] else 'NO: ' + str(st['reason'])} |"
-    )
+    return [
+        pid,
+        f"{size['cell_size_m'] * 1e3:.3g} ({size['governed_by']})",
+        f"{st['cells']:,}",
+        faces,
+        f"{m['layers'].get('coverage', 0):.2f}",
+        f"{st['iterations']:,} ({st['criterion_used']})",
+        f"{fr['p']:.2g} / {fr['U']:.2g}",
+        f"{st['inlet_minus_outlet_pressure']['Pa']:.1f}",
+        f"{wss['mean']:.3g} / {wss['max']:.3g}",
+        f"{st['inflow']['flow_rate_l_min']:.3g}",
+        f"{job_s:.0f} ({solver_s:.0f})",
+        "yes" if st["converged"] else "NO: " + str(st["reason"]),
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("-d", "--workdir", type=Path, help="Snakemake working directory (default: temporary)")
     ap.add_argument("--cores", type=int, default=2, help="cores for Snakemake (default 2)")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     if not (REPO.parent / "shared" / "data").is_dir():
         print(f"real_cohort: error: {REPO.parent / 'shared' / 'data'} is absent", file=sys.stderr)
@@ -118,14 +145,22 @@ def main(argv: list[str] | None = None) -> int:
         ids = sheet(wd / "patients.tsv")
         r = run_workflow(wd, ["config.yaml"], "patients.tsv", a.cores, "real cohort, default config")
         res = wd / "results"
-        print(
-            "| vessel | cell mm (set by) | cells | wall / inlet / outlet faces | layer coverage | SIMPLE iterations "
-            "(criterion) | final residuals p / U | inlet - outlet pressure Pa | WSS mean / max Pa | inflow L/min "
-            "| time per patient s (solver s) | converged |"
-        )
+        print("| " + " | ".join(COLUMNS) + " |")
         print("|---" * 12 + "|")
+        rows = []
         for pid in ids:
-            print(row(res, pid))
+            rows.append(cells(res, pid))
+            print("| " + " | ".join(rows[-1]) + " |")
+        if a.json:
+            from _table import command_line, write_table
+
+            write_table(
+                a.json,
+                command=command_line(),
+                measured=f"one run, default config/config.yaml, {a.cores} cores for Snakemake",
+                columns=COLUMNS[:-1],
+                rows=[c[:-1] for c in rows],
+            )
         atlas = json.loads((res / "atlas" / "atlas.json").read_text())
         print(f"atlas: {len(atlas['patients_included'])} included, {len(atlas['patients_excluded'])} excluded")
     return 0 if r.returncode == 0 else 1

@@ -6,12 +6,13 @@ aorta with three supra-aortic branches) through the whole workflow with the defa
 config/config.yaml, then one row per patient: the stage reached (in the atlas, or the stage it
 was excluded at and why), its fit quality, the wall check, cells and the CFD verdict.
 
-    .venv/bin/python bench/stage_survey.py [-d DIR] [--cores 2]
+    .venv/bin/python bench/stage_survey.py [-d DIR] [--cores 2] [--json PATH]
 
 DIR (default: a temporary folder) is the Snakemake working directory; a finished DIR is only
 re-read. The sheet is config/real_patients.tsv (AortaCFD patient1 at its 1.0 mm cell size there,
 the others auto) plus the two shared meshes it leaves out and the synthetic aortas, whose STL
-files are written into DIR/meshes.
+files are written into DIR/meshes. ``--json PATH`` also writes the table in the docs' format
+(docs/data/bench/stage_survey.json).
 """
 
 from __future__ import annotations
@@ -65,11 +66,16 @@ def write_sheet(wd: Path) -> list[str]:
     return write_rows(wd / "patients.tsv", real_rows() + EXTRA + synthetic(wd / "meshes"))
 
 
-def row(res: Path, pid: str, atlas: dict) -> str:
+#: the table's columns (as printed and in the docs JSON)
+COLUMNS = ["patient", "stage reached", "fit quality", "Eq. 8 wall", "cells", "CFD"]
+
+
+def cells(res: Path, pid: str, atlas: dict) -> list[str]:
+    """One row's cells, in the order of :data:`COLUMNS`."""
     p = res / "patients" / pid
     fit = json.loads((p / "fit" / "fit_report.json").read_text())
     if fit.get("failed"):
-        return f"| {pid} | fit | {fit['reason'][:140]} | - | - | - |"
+        return [pid, "fit", fit["reason"][:140], "-", "-", "-"]
     quality = fit["quality"] + ("" if fit["quality"] == "ok" else f" ({'; '.join(fit['quality_reasons'])[:90]})")
     wall = (p / "wall" / "wall.stl").read_bytes()[:200]
     wall_ok = "refused" if wall.lstrip().startswith(b"{") else "closed"
@@ -82,13 +88,14 @@ def row(res: Path, pid: str, atlas: dict) -> str:
     else:
         ex = atlas.get("patients_excluded", {}).get(pid, {})
         stage = f"excluded at {ex.get('stage', '?')}: {ex.get('reason', '')[:100]}"
-    return f"| {pid} | {stage} | {quality} | {wall_ok} | {st.get('cells', '-')} | {cfd} |"
+    return [pid, stage, quality, wall_ok, str(st.get("cells", "-")), cfd]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-d", "--directory", type=Path)
     ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     args = ap.parse_args()
     if not DATA.is_dir():
         sys.exit(f"{DATA} not found: this benchmark needs ../shared/data beside the repository")
@@ -101,13 +108,25 @@ def main() -> None:
     res = wd / "results"
     atlas_file = res / "atlas" / "atlas.json"
     atlas = json.loads(atlas_file.read_text()) if atlas_file.exists() else {}
-    print("| patient | stage reached | fit quality | Eq. 8 wall | cells | CFD |")
+    print("| " + " | ".join(COLUMNS) + " |")
     print("|---|---|---|---|---|---|")
+    rows = []
     for pid in ids:
         try:
-            print(row(res, pid, atlas))
+            rows.append(cells(res, pid, atlas))
         except FileNotFoundError as exc:
-            print(f"| {pid} | not finished ({exc.filename}) | | | | |")
+            rows.append([pid, f"not finished ({exc.filename})", "", "", "", ""])
+        print("| " + " | ".join(rows[-1]) + " |")
+    if args.json:
+        from _table import command_line, write_table
+
+        write_table(
+            args.json,
+            command=command_line(),
+            measured="one run, default config/config.yaml",
+            columns=COLUMNS,
+            rows=rows,
+        )
 
 
 if __name__ == "__main__":

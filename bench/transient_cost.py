@@ -2,7 +2,7 @@
 """The transient solve's cost and answers under several PIMPLE settings, from one SIMPLE state.
 
     .venv/bin/python bench/transient_cost.py CASE -d DIR [--variant NAME:key=value,...]...
-    .venv/bin/python bench/transient_cost.py --jet-tube -d DIR [--variant ...]...
+    .venv/bin/python bench/transient_cost.py --jet-tube -d DIR [--variant ...]... [--json PATH]
     .venv/bin/python bench/transient_cost.py --at 1 1.5 2.3 -d DIR --variant default:  # re-judge
 
 ``--at F...`` re-reads a variant's records (finished or stopped) and prints its window's
@@ -27,6 +27,8 @@ Prints, per variant: pimpleFoam CPU s (its logs' ExecutionTime), time steps, dt 
 window in flow-through times, and each mean with its 95 % half-width (inlet-outlet pressure
 difference, area-mean TAWSS) and the relative U half-width; then the machine and its load.
 Variants run one after the other (one core each); a finished variant's DIR is re-read.
+``--json PATH`` also writes the table without its "known" column in the docs' format
+(docs/data/bench/transient_cost_jet_tube.json for ``--jet-tube``).
 """
 
 from __future__ import annotations
@@ -135,20 +137,40 @@ def run_variant(simple: Path, status: dict, work: Path, name: str, keys: dict) -
     return st
 
 
-def row(name: str, st: dict) -> str:
+#: the docs JSON's columns: the printed table's but its last ("known")
+JSON_COLUMNS = [
+    "variant",
+    "maxCo / outer correctors",
+    "pimpleFoam CPU s",
+    "time steps",
+    "dt ms",
+    "wash-out + window (flow-throughs)",
+    "dp Pa (95 %)",
+    "mean TAWSS Pa (95 %)",
+    "U +-%",
+]
+
+
+def cells(name: str, st: dict) -> list[str]:
+    """One variant's cells as printed: :data:`JSON_COLUMNS`, then "known" (a failed variant: two)."""
     tr = st.get("transient") or {}
     if not tr.get("evaluated"):
-        return f"| {name} | failed: {st.get('reason')} |"
+        return [name, f"failed: {st.get('reason')}"]
     s = tr["statistics"]
     dp, w = s["inlet_minus_outlet_pressure"], s["tawss_mean"]
     c = tr["courant"]
-    return (
-        f"| {name} | {c['pimple_max_co']:.3g} / {c['outer_correctors']} | {st['pimple_cpu_s']:.0f} | "
-        f"{sum(tr['time_steps'].values()):,} | {1e3 * tr['delta_t_s']['min']:.3g}-{1e3 * tr['delta_t_s']['max']:.3g} | "
-        f"{tr['washout_flow_throughs']:.2g} + {tr['window_flow_throughs']:.3g} | "
-        f"{dp['mean_Pa']:.4g} +- {dp['half_width_Pa']:.2g} | {w['mean_Pa']:.4g} +- {w['half_width_Pa']:.2g} | "
-        f"{100 * tr['relative_errors'].get('U', float('nan')):.2g} | {'yes' if tr['stationary'] else 'no'} |"
-    )
+    return [
+        name,
+        f"{c['pimple_max_co']:.3g} / {c['outer_correctors']}",
+        f"{st['pimple_cpu_s']:.0f}",
+        f"{sum(tr['time_steps'].values()):,}",
+        f"{1e3 * tr['delta_t_s']['min']:.3g}-{1e3 * tr['delta_t_s']['max']:.3g}",
+        f"{tr['washout_flow_throughs']:.2g} + {tr['window_flow_throughs']:.3g}",
+        f"{dp['mean_Pa']:.4g} +- {dp['half_width_Pa']:.2g}",
+        f"{w['mean_Pa']:.4g} +- {w['half_width_Pa']:.2g}",
+        f"{100 * tr['relative_errors'].get('U', float('nan')):.2g}",
+        "yes" if tr["stationary"] else "no",
+    ]
 
 
 def judge_at(dst: Path, fts: list[float]) -> None:
@@ -198,7 +220,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--at", type=float, nargs="+", help="re-judge each --variant's window at these flow-throughs")
     ap.add_argument("-d", "--workdir", type=Path, required=True, help="where the copies are solved")
     ap.add_argument("--variant", action="append", help="NAME:key=value,... (cfd.solver.transient keys)")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
+    if a.json and a.at:
+        ap.error("--json writes the variants' table, which --at does not print")
     if a.at:
         for text in a.variant or ["default:"]:
             judge_at(a.workdir.resolve() / parse_variant(text)[0], a.at)
@@ -219,10 +244,22 @@ def main(argv: list[str] | None = None) -> int:
         "| dp Pa (95 %) | mean TAWSS Pa (95 %) | U +-% | known |"
     )
     print("|---" * 10 + "|")
+    rows = []
     for text in a.variant or (JET_TUBE_VARIANTS if a.jet_tube else DEFAULT_VARIANTS):
         name, keys = parse_variant(text)
-        print(row(name, run_variant(simple, status, a.workdir.resolve(), name, keys)), flush=True)
+        rows.append(cells(name, run_variant(simple, status, a.workdir.resolve(), name, keys)))
+        print("| " + " | ".join(rows[-1]) + " |", flush=True)
     print(f"{date.today()}, {platform.node()} ({os.cpu_count()} cores), load {os.getloadavg()[0]:.1f}")
+    if a.json:
+        from _table import command_line, write_table
+
+        write_table(
+            a.json,
+            command=command_line(),
+            measured=f"one run from one SIMPLE state ({status['cells']:,} cells), variants one after the other",
+            columns=JSON_COLUMNS,
+            rows=[(c + ["-"] * len(JSON_COLUMNS))[: len(JSON_COLUMNS)] for c in rows],
+        )
     return 0
 
 

@@ -1,6 +1,6 @@
 """bench/_table.py writes the docs' result files: what it writes the docs extension reads, and every
 file of docs/data/bench says whether a bench script wrote it or it was transcribed (and then how
-to re-measure it)."""
+to re-measure it, or which bench script run regenerates the file)."""
 
 import json
 import os
@@ -50,5 +50,11 @@ def test_every_result_file_says_where_its_numbers_come_from():
             assert source == f"written by {data['command']}", f.name
         else:
             assert source.startswith("transcribed from the measured run of "), f.name
+            regenerate = f"regenerate with: `{data['command']}`" in source
+            if regenerate:  # the bench script writes this very file when run again
+                assert data["command"].endswith(f" --json docs/data/bench/{f.name}"), f.name
+                script = next(w for w in data["command"].split() if w.startswith("bench/"))
+                assert '"--json"' in (ROOT / script).read_text(), f"{f.name}: {script} has no --json"
             remeasure = f"re-measure with: `{data['command']}`" in source
-            assert remeasure or f"no single command re-measures it yet: {data['command']}" in source, f.name
+            no_command = f"no single command re-measures it yet: {data['command']}" in source
+            assert regenerate or remeasure or no_command, f.name
