@@ -18,7 +18,7 @@ if [ -f results/atlas/atlas.json ]; then
   "${smk[@]}" --report results/report.html || echo "[demo] snakemake --report failed (see above)" >&2
 fi
 echo
-echo "[demo] per patient:  results/patients/<id>/ (fit/, wall/, case/, status.json, fields.npz)"
+echo "[demo] per patient:  results/patients/<id>/ (fit/, wall/, case/, status.json, fields.npz, qc.png: the QC sheet)"
 echo "[demo] atlas:        $(pwd)/results/atlas/atlas.json (figures: results/atlas/figures/, VTP/VTU beside atlas.json)"
 [ -f results/report.html ] && echo "[demo] report:       $(pwd)/results/report.html"
 echo "[demo] provenance:   $(pwd)/results/provenance.json"
