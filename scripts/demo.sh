@@ -19,7 +19,7 @@ if [ -f results/atlas/atlas.json ]; then
 fi
 echo
 echo "[demo] per patient:  results/patients/<id>/ (fit/, wall/, case/, status.json, fields.npz, qc.png: the QC sheet)"
-echo "[demo] atlas:        $(pwd)/results/atlas/atlas.json (figures: results/atlas/figures/, VTP/VTU beside atlas.json)"
+echo "[demo] atlas:        $(pwd)/results/atlas/atlas.json (figures: results/atlas/figures/, cohort table: results/atlas/patients.html)"
 [ -f results/report.html ] && echo "[demo] report:       $(pwd)/results/report.html"
 echo "[demo] provenance:   $(pwd)/results/provenance.json"
 if [ -f results/atlas/atlas.json ]; then
