@@ -86,7 +86,7 @@ def test_ci_cohort_on_slurm_matches_the_local_run(tmp_path, workdir_factory, rep
     assert slurm.config()["cfd"]["ranks"] == ranks
     expected = _expected_jobs(slurm)
     assert sorted(expected) == sorted([*IDS, "atlas_build"]), expected
-    assert all(len(expected[pid]) == 6 for pid in IDS), expected  # phantom + 5 rules per patient
+    assert all(len(expected[pid]) == 7 for pid in IDS), expected  # phantom + 6 rules per patient
     r = slurm.snakemake(
         "--profile",  # the shipped profiles/slurm with the test cluster's partition, status, account
         str(slurm_cluster.snakemake_profile(tmp_path / "profile")),
