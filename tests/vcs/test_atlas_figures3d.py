@@ -133,3 +133,21 @@ def test_wall_field_panels_are_coloured_walls_on_a_background(figures):
     mean = panel(figures[0]["flow_WSS_mean_3d"], 0, 2), panel(figures[0]["flow_WSS_mean_3d"], 1, 2)
     grey = [np.sum(foreground(p) & ~coloured(p) & (p.astype(int).sum(-1) > 300)) for p in mean]
     assert max(grey) > 50, grey
+
+
+def test_a_figure_for_print_has_scale_times_the_pixels(figures, tmp_path):
+    """atlas.figure_scale: the same figure at 2x the panel size (text and lines with it), the
+    same picture: its 2x2-pixel blocks averaged give back the 1x figure within anti-aliasing."""
+    from matplotlib.image import imread
+
+    from vcs.atlas.plots3d import PANEL_3D_PX, ViewFrame, shape_mean_png
+
+    _, _, atlas, mean = figures
+    frame = ViewFrame.from_model(mean)
+    shape_mean_png(mean, frame, tmp_path / "x1.png")
+    shape_mean_png(mean, frame, tmp_path / "x2.png", scale=2)
+    one, two = (imread(tmp_path / f"x{k}.png")[..., :3] for k in (1, 2))
+    assert one.shape[:2] == (PANEL_3D_PX[1], 2 * PANEL_3D_PX[0])
+    assert two.shape[:2] == (2 * one.shape[0], 2 * one.shape[1])
+    down = two.reshape(one.shape[0], 2, one.shape[1], 2, 3).mean(axis=(1, 3))
+    assert np.mean(np.abs(down - one) > 0.25) < 0.03  # the same picture, sharper

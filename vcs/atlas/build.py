@@ -33,6 +33,7 @@ def build_atlas(
     n_modes: int = 3,
     figures: bool = True,
     figure_dir: str | Path | None = None,
+    figure_scale: int = 1,
     **options: Any,
 ) -> Atlas:
     """Compute the atlas (:func:`vcs.atlas.cohort.compute_atlas`) and write it to ``out_dir``.
@@ -63,6 +64,9 @@ def build_atlas(
         the 3-D ``renderer`` and the flow figures' ``colour_limits``.
     figure_dir : str or Path, optional
         Directory of the PNGs (default ``out_dir/figures``); each figure is written once.
+    figure_scale : int
+        Pixel scale of the 3-D figures (1: 340 x 400 pixels per panel, for the screen; 2-4 for
+        print: text and lines scale with it).
     **options
         Further keyword arguments of :func:`vcs.atlas.cohort.compute_atlas` (e.g. ``reports``,
         the fit reports).
@@ -96,7 +100,13 @@ def build_atlas(
 
         written = write_atlas_figures(atlas, out, png_dir=figure_dir)
         written["figure_seconds"] = write_listed_3d(
-            atlas, written["mean_model"], written["png_dir"], out, written["files"], grid=written["grid"]
+            atlas,
+            written["mean_model"],
+            written["png_dir"],
+            out,
+            written["files"],
+            grid=written["grid"],
+            scale=figure_scale,
         )
         summary["files"], summary["renderer"] = written["files"], written["renderer"]
         summary["colour_limits"] = {

@@ -172,8 +172,10 @@ def render_panels(
     n_cols: int | None = None,
     bar: ColourBar | None = None,
     note: str = "",
+    scale: int = 1,
 ) -> None:
-    """Render ``panels`` (row-major, ``n_cols`` per row; default one row) off-screen to a PNG.
+    """Render ``panels`` (row-major, ``n_cols`` per row; default one row) off-screen to a PNG of
+    ``scale`` times :data:`PANEL_3D_PX` per panel (text and lines scaled with it: 2-4 for print).
 
     White background, black text, one headlight; each panel's camera from ``frame``, zoomed to
     fit. ``bar`` is drawn horizontally at the bottom of its panel (labels above it, its title
@@ -204,7 +206,7 @@ def render_panels(
             if note and i == 0:
                 pl.add_text(note, position=(0.03, 0.01), viewport=True, font_size=NOTE_FONT_PT, color=TEXT_COLOUR)
             frame.set_camera(pl.camera, p.view, aspect=w / h)
-        pl.screenshot(str(path))
+        pl.screenshot(str(path), scale=scale)
     finally:
         pl.close()
 
@@ -288,7 +290,7 @@ def centerline_tube(model: VesselModel, radius: float) -> Any:
     return pv.lines_from_points(model.vcs.curve(np.linspace(0.0, 1.0, 101))).tube(radius=radius, n_sides=10)
 
 
-def shape_mean_png(mean: VesselModel, frame: ViewFrame, path: PathLike) -> tuple[float, float]:
+def shape_mean_png(mean: VesselModel, frame: ViewFrame, path: PathLike, *, scale: int = 1) -> tuple[float, float]:
     """Paper Fig. 6: the mean wall coloured by its radius rho_w (mm), sagittal and coronal views.
 
     Returns the colour limits (2nd-98th percentile of rho_w on the wall).
@@ -303,11 +305,13 @@ def shape_mean_png(mean: VesselModel, frame: ViewFrame, path: PathLike) -> tuple
     wall = wall_polydata(mean, {"rho_w": rho}, n=n)
     look = coloured("rho_w", clim, "viridis")
     panels = [Panel(f"mean shape, {v}", v, [(wall, look)]) for v in ("sagittal", "coronal")]
-    render_panels(panels, frame, path, bar=ColourBar("rho_w (mm)", clim, "viridis", panel=1))
+    render_panels(panels, frame, path, bar=ColourBar("rho_w (mm)", clim, "viridis", panel=1), scale=scale)
     return clim
 
 
-def shape_mode_png(pca: PCA, template: VesselModel, mode: int, frame: ViewFrame, path: PathLike) -> tuple[float, float]:
+def shape_mode_png(
+    pca: PCA, template: VesselModel, mode: int, frame: ViewFrame, path: PathLike, *, scale: int = 1
+) -> tuple[float, float]:
     """Paper Fig. 7: shape mode ``mode`` (0-based) as its mean - 2 sigma and mean + 2 sigma walls.
 
     Columns: the -2 sigma wall and the +2 sigma wall coloured by the radius change
@@ -340,7 +344,7 @@ def shape_mode_png(pca: PCA, template: VesselModel, mode: int, frame: ViewFrame,
     # framed on every wall drawn (the +-2 sigma walls of a varied cohort reach beyond the mean's),
     # the same scale in every panel
     shown = np.vstack([frame.wall, *(np.asarray(walls[s].points) for s in walls)])
-    render_panels(panels, replace(frame, wall=shown), path, n_cols=3, bar=bar)
+    render_panels(panels, replace(frame, wall=shown), path, n_cols=3, bar=bar, scale=scale)
     return clim
 
 
@@ -404,6 +408,7 @@ def flow_mean_png(
     *,
     on_wall: bool,
     clim: tuple[float, float],
+    scale: int = 1,
 ) -> tuple[float, float]:
     """Paper Fig. 8: the mean of flow field ``name`` on the mean shape.
 
@@ -431,7 +436,8 @@ def flow_mean_png(
             except Exception as exc:  # noqa: BLE001  # a figure without streamlines is still a figure
                 log.warning("no streamlines in %s: %s", Path(path).name, exc)
     note = LEFT_OUT_NOTE if bool(np.isnan(mean).any()) else ""
-    render_panels(shown, frame, path, bar=ColourBar(label, clim, cmap, panel=len(shown) - 1), note=note)
+    bar = ColourBar(label, clim, cmap, panel=len(shown) - 1)
+    render_panels(shown, frame, path, bar=bar, note=note, scale=scale)
     return clim
 
 
@@ -453,6 +459,7 @@ def flow_mode_png(
     on_wall: bool,
     clim: tuple[float, float],
     share: float,
+    scale: int = 1,
 ) -> tuple[float, float]:
     """Paper Fig. 9: flow mode ``mode`` (0-based) of field ``name`` as mean - 2 sigma, mean,
     mean + 2 sigma, and its top-20 % region (red: the cells with the largest |mode|
@@ -483,17 +490,25 @@ def flow_mode_png(
             Panel(f"mode {mode + 1} ({share:.0f} %): top 20 % red", view, [(meshes["m"], mask_look())]),
         ]
     note = LEFT_OUT_NOTE if any(bool(np.isnan(v).any()) for v in arrays.values()) else ""
-    render_panels(shown, frame, path, n_cols=4, bar=ColourBar(label, clim, cmap, panel=1), note=note)
+    render_panels(shown, frame, path, n_cols=4, bar=ColourBar(label, clim, cmap, panel=1), note=note, scale=scale)
     return clim
 
 
 def write_listed_3d(
-    atlas: Atlas, mean_model: VesselModel, pngs: Path, out: Path, files: dict[str, Any], *, grid: Any
+    atlas: Atlas,
+    mean_model: VesselModel,
+    pngs: Path,
+    out: Path,
+    files: dict[str, Any],
+    *,
+    grid: Any,
+    scale: int = 1,
 ) -> dict[str, float]:
-    """The 3-D figures (:func:`write_3d_figures`), listed in ``files`` (relative to ``out``); their
-    render seconds. Without an off-screen render window: none, and a warning."""
+    """The 3-D figures (:func:`write_3d_figures`, ``scale`` times the panel size), listed in
+    ``files`` (relative to ``out``); their render seconds. Without an off-screen render window:
+    none, and a warning."""
     try:
-        written = write_3d_figures(atlas, mean_model, pngs, info=None if grid is None else grid[1])
+        written = write_3d_figures(atlas, mean_model, pngs, info=None if grid is None else grid[1], scale=scale)
     except Exception as exc:  # noqa: BLE001  # no off-screen render window: the flat figures remain
         log.warning("no 3-D atlas figures: pyvista off-screen rendering failed (%s)", exc)
         return {}
@@ -502,9 +517,10 @@ def write_listed_3d(
 
 
 def write_3d_figures(
-    atlas: Atlas, mean_model: VesselModel, png_dir: PathLike, *, info: dict[str, Any] | None = None
+    atlas: Atlas, mean_model: VesselModel, png_dir: PathLike, *, info: dict[str, Any] | None = None, scale: int = 1
 ) -> dict[str, Any]:
-    """Write every 3-D figure of the module doc into ``png_dir``.
+    """Write every 3-D figure of the module doc into ``png_dir``, ``scale`` times
+    :data:`PANEL_3D_PX` per panel (1 for the screen, 2-4 for print).
 
     Parameters
     ----------
@@ -553,7 +569,7 @@ def write_3d_figures(
     files, limits, seconds = {}, {}, {}
     for key, draw in jobs:
         t0 = time.perf_counter()
-        clim = draw(path=out / f"{key}.png")
+        clim = draw(path=out / f"{key}.png", scale=scale)
         seconds[key] = time.perf_counter() - t0
         files[key] = str(out / f"{key}.png")
         limits[key] = [float(clim[0]), float(clim[1])]
