@@ -1113,3 +1113,76 @@ def test_plateau_settings_are_checked(tmp_path):
         cfg = {"solver": {"plateau": bad}}
         with pytest.raises(VCSInputError, match=r"cfd\.solver\.plateau"):
             render_case(tmp_path / "x", _tube(tmp_path), cfg, flavour="esi")
+
+
+_CAVITY = {
+    "system/blockMeshDict": """convertToMeters 0.1;
+vertices ((0 0 0) (1 0 0) (1 1 0) (0 1 0) (0 0 0.1) (1 0 0.1) (1 1 0.1) (0 1 0.1));
+blocks (hex (0 1 2 3 4 5 6 7) (8 8 1) simpleGrading (1 1 1));
+boundary (lid {type wall; faces ((3 7 6 2));}
+          walls {type wall; faces ((0 4 7 3) (2 6 5 1) (1 5 4 0));}
+          frontAndBack {type empty; faces ((0 3 2 1) (4 5 6 7));});
+""",
+    "system/fvSchemes": """ddtSchemes {default Euler;} gradSchemes {default Gauss linear;}
+divSchemes {default none; div(phi,U) Gauss linear;} laplacianSchemes {default Gauss linear orthogonal;}
+interpolationSchemes {default linear;} snGradSchemes {default orthogonal;}
+""",
+    "system/fvSolution": """solvers {p {solver PCG; preconditioner DIC; tolerance 1e-6; relTol 0.05;}
+pFinal {$p; relTol 0;} U {solver smoothSolver; smoother symGaussSeidel; tolerance 1e-5; relTol 0;}}
+PISO {nCorrectors 2; nNonOrthogonalCorrectors 0; pRefCell 0; pRefValue 0;}
+""",
+    "constant/transportProperties": "transportModel Newtonian; nu 0.01;\n",
+    "0/U": """dimensions [0 1 -1 0 0 0 0]; internalField uniform (0 0 0);
+boundaryField {lid {type fixedValue; value uniform (1 0 0);} walls {type noSlip;} frontAndBack {type empty;}}
+""",
+    "0/p": """dimensions [0 2 -2 0 0 0 0]; internalField uniform 0;
+boundaryField {lid {type zeroGradient;} walls {type zeroGradient;} frontAndBack {type empty;}}
+""",
+}
+
+
+@needs_foam
+def test_restart_finds_a_time_folder_written_with_more_digits(tmp_path):
+    """A time folder OpenFOAM wrote with more digits than the controlDict's timePrecision (it raises
+    the precision on its own: '366.0959205891', AortaCFD patient1's wash-out stopped by writeNow) is
+    looked for under a 10-digit name by a solver started from the latest time and not found; the
+    stages render timePrecision from the folders (vcs.cfd.utilities.time_precision). Real icoFoam on
+    a 8x8 lid-driven cavity."""
+    from vcs.cfd.openfoam import foam_env
+    from vcs.cfd.utilities import time_precision
+
+    name = "366.0959205891"  # 13 significant digits
+    for rel, body in _CAVITY.items():
+        cls = "volVectorField" if rel == "0/U" else "volScalarField" if rel == "0/p" else "dictionary"
+        head = f"FoamFile {{version 2.0; format ascii; class {cls}; object {Path(rel).name};}}\n"
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(head + body)
+
+    def control(precision: int) -> None:
+        (tmp_path / "system" / "controlDict").write_text(
+            "FoamFile {version 2.0; format ascii; class dictionary; object controlDict;}\n"
+            "application icoFoam; startFrom latestTime; startTime 0; stopAt endTime; "
+            f"endTime {float(name) + 0.01!r}; deltaT 0.005; writeControl timeStep; writeInterval 100; "
+            f"writeFormat ascii; timeFormat general; timePrecision {precision};\n"
+        )
+
+    def run(precision: int) -> subprocess.CompletedProcess:
+        control(precision)
+        return subprocess.run(["icoFoam"], cwd=tmp_path, env=env, capture_output=True, text=True)
+
+    env = foam_env()
+    control(10)
+    assert subprocess.run(["blockMesh"], cwd=tmp_path, env=env, capture_output=True).returncode == 0
+    (tmp_path / "0").rename(tmp_path / name)
+    (tmp_path / name / "uniform").mkdir()
+    (tmp_path / name / "uniform" / "time").write_text(  # as pimpleFoam writes it: the value's every digit
+        "FoamFile {version 2.0; format ascii; class dictionary; object time;}\n"
+        f'value 366.095920589135972; name "{name}"; index 10; deltaT 0.005; deltaT0 0.005;\n'
+    )
+    assert time_precision(tmp_path) == 13
+
+    failed = run(10)
+    assert failed.returncode != 0 and "cannot find file" in failed.stdout + failed.stderr
+    ok = run(time_precision(tmp_path))
+    assert ok.returncode == 0, ok.stdout[-2000:]
+    assert "Time = 366.1009205891" in ok.stdout  # the first step from the 13-digit folder

@@ -24,6 +24,7 @@ from vcs.cfd.sizing import (
     surface_area,
     vessel_sizes,
 )
+from vcs.cfd.utilities import TIME_PRECISION
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 from vcs.mesh import points_inside, read_stl_solids, triangle_cross
 
@@ -233,6 +234,7 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "solids": state["solids"],
         "patches": state["patches"],
         "end_time": cfd["solver"]["max_iterations"],
+        "time_precision": TIME_PRECISION,
         "delta_t": 1,
         "div_scheme": cfd["solver"]["div_scheme"],
         "residual_control": True,

@@ -27,7 +27,7 @@ from vcs.cfd.openfoam import FLAVOURS
 from vcs.cfd.status import _log_summary, _wall_faces
 from vcs.cfd.steady import STAGE_FILES, request_write_now
 from vcs.cfd.timeseries import mean_error, mser_truncation, uniform_record
-from vcs.cfd.utilities import Stop, _fmt_time, _Runner, _solver_failure, _time_dirs, progress
+from vcs.cfd.utilities import Stop, _fmt_time, _Runner, _solver_failure, _time_dirs, progress, time_precision
 
 log = logging.getLogger(__name__)
 
@@ -409,6 +409,7 @@ def _run_stage(solve: _Pimple, name: str, end: float, watch: Any, *, average: bo
         write_interval=_fmt_time(end - write_origin(solve.root, solve.state["flavour"])),
         average=average,
         monitors=True,
+        time_precision=time_precision(solve.root),  # the latest folder may carry more digits than 10
         **(solve.common | extra),
     )
     log = f"pimpleFoam.{name}"

@@ -166,6 +166,36 @@ def _time_dirs(root: Path) -> list[tuple[float, str]]:
     return sorted(out)
 
 
+TIME_PRECISION = 10
+"""The controlDict's ``timePrecision`` (significant digits of a time folder's name), unless a
+folder already written needs more (:func:`time_precision`)."""
+
+
+def time_precision(root: Path) -> int:
+    """The ``timePrecision`` a solver restarted from ``root``'s latest time needs to find its folder.
+
+    OpenFOAM names a time folder with ``timePrecision`` significant digits and raises that precision
+    on its own when two names would round alike or the name would misstate the time (ESI v1912
+    ``Time::operator++``: "Increased the timePrecision from 10 to 13 ..."). A run started with
+    ``startFrom latestTime`` names the time it reads with its controlDict's precision, so a folder
+    written at 13 digits (``366.0959205891``) is looked for as ``366.0959206`` and not found (AortaCFD
+    patient1's averaging stage after a wash-out stopped by writeNow). So: the most significant digits of
+    any time folder name under ``root``, at least :data:`TIME_PRECISION`.
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> for name in ("0", "366", "366.0959205891", "1e-05"):
+    ...     (d / name).mkdir()
+    >>> time_precision(d)
+    13
+    """
+    digits = [TIME_PRECISION]
+    for _, name in _time_dirs(root):
+        mantissa = name.lstrip("+-").split("e")[0].split("E")[0].replace(".", "").lstrip("0")
+        digits.append(len(mantissa))
+    return max(digits)
+
+
 def _fmt_time(t: float) -> str:
     """A solver time for a dictionary (12 significant digits)."""
     return f"{t:.12g}"
