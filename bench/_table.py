@@ -6,6 +6,11 @@ page by the ``vcs-bench-table`` directive (docs/_ext/vcsdocs.py). Standard libra
 The file names the command that wrote it (``"source": "written by <command>"``) and where and when
 it was measured (date, platform, CPU model and count, load averages at writing), so the page can
 say how to re-measure every number it shows.
+
+A bench script prints its table and, given ``--json PATH``, writes it with :func:`emit` (each row
+printed as it is made), or with :func:`save` when what it prints is another table::
+
+    emit(COLUMNS, (cells(pid) for pid in ids), a.json, "one run", json_columns=..., json_row=...)
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import os
 import platform
 import shlex
 import sys
+from collections.abc import Callable, Iterable, Sequence
 from datetime import datetime
 from pathlib import Path
 
@@ -109,3 +115,73 @@ def write_table(
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n")
     return path
+
+
+def markdown_row(cells: Sequence[str]) -> str:
+    """One row of a markdown table: ``| a | b |``."""
+    return "| " + " | ".join(cells) + " |"
+
+
+def save(
+    json_path: str | os.PathLike | None,
+    *,
+    columns: list[str],
+    rows: list[list[str]],
+    measured: str,
+    command: str | None = None,
+    notes: list[str] | None = None,
+) -> Path | None:
+    """:func:`write_table` to ``json_path`` when it is given (a script's ``--json PATH``; None:
+    nothing is written), the command by default this process's (:func:`command_line`)."""
+    if not json_path:
+        return None
+    cmd = command if command is not None else command_line()
+    return write_table(json_path, command=cmd, measured=measured, columns=columns, rows=rows, notes=notes)
+
+
+def emit(
+    columns: list[str],
+    rows: Iterable[Sequence[str]],
+    json_path: str | os.PathLike | None = None,
+    measured: str = "",
+    command: str | None = None,
+    *,
+    notes: list[str] | None = None,
+    json_columns: list[str] | None = None,
+    json_row: Callable[[list[str]], list[str]] | None = None,
+) -> list[list[str]]:
+    """Print a markdown table, each row as soon as ``rows`` yields it, then :func:`save` it.
+
+    Parameters
+    ----------
+    columns : list of str
+        The printed header.
+    rows : iterable of lists of str
+        The printed rows (a generator: each is printed before the next is made).
+    json_path, measured, command, notes
+        As :func:`save` (nothing is written without ``json_path``).
+    json_columns : list of str, optional
+        The docs table's columns, when they are not the printed ones.
+    json_row : callable, optional
+        A printed row as a row of the docs table (default: the row itself).
+
+    Returns
+    -------
+    list of list of str
+        The printed rows.
+    """
+    print(markdown_row(columns))
+    print("|---" * len(columns) + "|", flush=True)
+    printed = []
+    for r in rows:
+        printed.append(list(r))
+        print(markdown_row(printed[-1]), flush=True)
+    save(
+        json_path,
+        columns=list(json_columns if json_columns is not None else columns),
+        rows=[json_row(r) for r in printed] if json_row else printed,
+        measured=measured,
+        command=command,
+        notes=notes,
+    )
+    return printed

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _table import save  # bench/ is on sys.path when this runs as a script
 
 from vcs.ends import find_ends
 from vcs.io import Surface, read_surface
@@ -190,17 +191,13 @@ def main():
     if not args.fit_only:
         load_before = os.getloadavg()[0]
         rows, note = library_table()
-        if args.json:
-            from _table import command_line, write_table
-
-            write_table(
-                args.json,
-                command=command_line(),
-                measured=f"load {load_before:.1f} at the start; best of 3, wall / CPU seconds",
-                columns=LIBRARY_COLUMNS,
-                rows=rows,
-                notes=[note],
-            )
+        save(
+            args.json,
+            measured=f"load {load_before:.1f} at the start; best of 3, wall / CPU seconds",
+            columns=LIBRARY_COLUMNS,
+            rows=rows,
+            notes=[note],
+        )
     fit_command_table(args.repeat)
 
 

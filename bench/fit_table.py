@@ -26,6 +26,8 @@ import time
 from datetime import date
 from pathlib import Path
 
+from _table import save  # bench/ is on sys.path when this runs as a script
+
 from vcs.io import Surface
 from vcs.mesh import write_stl_binary
 from vcs.phantoms import make_phantom
@@ -132,12 +134,9 @@ def main(argv: list[str] | None = None) -> None:
             print("| " + " | ".join(rows[-1]) + " |", flush=True)
     print(f"\nload (1 min average) during the run: {min(loads):.1f}-{max(loads):.1f}" if loads else "")
     sys.stdout.flush()
-    if args.json and loads:
-        from _table import command_line, write_table
-
-        write_table(
+    if loads:  # a row was measured
+        save(
             args.json,
-            command=command_line(),
             measured=f"load {min(loads):.1f}-{max(loads):.1f} during the run (1 min average); one run",
             columns=COLUMNS,
             rows=rows,

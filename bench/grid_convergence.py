@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from _table import save  # bench/ is on sys.path when this runs as a script
 
 from vcs.cfd import render_case, run_case, sample_case
 from vcs.cfd.resample import read_case
@@ -277,17 +278,13 @@ def main(argv: list[str] | None = None) -> int:
             f"{ext} | {gci_text} |"
         )
         rows.append([LABELS[q], *(f"{g[q]:.4g}" for g in grids), f"{r['observed_order']:.2f}", ext, gci_text])
-    if a.json:
-        from _table import command_line, write_table
-
-        heads = [f"{g['background_cell_mm']:.3g} mm ({g['cells']:,})" for g in grids]
-        write_table(
-            a.json,
-            command=command_line(),
-            measured=f"one run, {result['total_time_s']:.0f} s wall; also in {a.output / 'grid_convergence.json'}",
-            columns=["quantity", heads[0][:-1] + " cells)", *heads[1:], "observed order", "Richardson", "GCI fine"],
-            rows=rows,
-        )
+    heads = [f"{g['background_cell_mm']:.3g} mm ({g['cells']:,})" for g in grids]
+    save(
+        a.json,
+        measured=f"one run, {result['total_time_s']:.0f} s wall; also in {a.output / 'grid_convergence.json'}",
+        columns=["quantity", heads[0][:-1] + " cells)", *heads[1:], "observed order", "Richardson", "GCI fine"],
+        rows=rows,
+    )
     print(f"cells {result['cells']}; total {result['total_time_s']:.0f} s -> {a.output / 'grid_convergence.json'}")
     return 0
 

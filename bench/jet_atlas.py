@@ -25,7 +25,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from real_cohort import job_seconds, run_workflow  # bench/ is on sys.path when this runs as a script
+from _table import emit, markdown_row  # bench/ is on sys.path when this runs as a script
+from real_cohort import job_seconds, run_workflow
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = ("config.yaml", "paper.yaml", "paper_atlas.yaml")
@@ -68,8 +69,12 @@ def solver_cpu_s(case: Path) -> float:
 
 def row(res: Path, pid: str) -> str:
     """One table row from the patient's status.json, logs and benchmark files ('-' where absent)."""
-    c = cells(res, pid)
-    return "| " + " | ".join(c[:2] if c[1] == NO_STATUS else c) + " |"
+    return markdown_row(printed(cells(res, pid)))
+
+
+def printed(c: list[str]) -> list[str]:
+    """The cells of :func:`cells` as printed (a patient without status.json: its id and reason)."""
+    return c[:2] if c[1] == NO_STATUS else c
 
 
 def cells(res: Path, pid: str) -> list[str]:
@@ -133,20 +138,13 @@ def main(argv: list[str] | None = None) -> int:
         ids = [r["id"] for r in csv.DictReader((ln for ln in open(sheet) if not ln.startswith("#")), delimiter="\t")]
         r = run_workflow(wd, list(CONFIGS), str(sheet), a.cores, f"jet atlas, {' + '.join(CONFIGS)}")
         res = wd / "results"
-        print("| " + " | ".join(COLUMNS) + " |")
-        print("|---" * 16 + "|")
-        for pid in ids:
-            print(row(res, pid))
-        if a.json:
-            from _table import command_line, write_table
-
-            write_table(
-                a.json,
-                command=command_line(),
-                measured=f"one run, config/{' + config/'.join(CONFIGS)}, {a.cores} cores for Snakemake",
-                columns=COLUMNS,
-                rows=[cells(res, pid) for pid in ids],
-            )
+        emit(
+            COLUMNS,
+            (printed(cells(res, pid)) for pid in ids),
+            a.json,
+            f"one run, config/{' + config/'.join(CONFIGS)}, {a.cores} cores for Snakemake",
+            json_row=lambda c: c + ["-"] * (len(COLUMNS) - len(c)),  # the '-' a printed failure leaves out
+        )
         if not (res / "atlas" / "atlas.json").exists():
             print("atlas: none (fewer than 3 patients included: see the rows above, results/logs/atlas_build/)")
             return 1

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _table import save  # bench/ is on sys.path when this runs as a script
 
 from vcs.centerline import uniform_knots
 from vcs.cfd import render_case, run_case, sample_case
@@ -237,16 +238,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"{r['faces_max_at_mm_deg'][1]:.0f} deg)",
             ]
         )
-    if a.json:
-        from _table import command_line, write_table
-
-        write_table(
-            a.json,
-            command=command_line(),
-            measured=f"one run, variants one after the other, serial; also in {a.output / 'local_wss.json'}",
-            columns=JSON_COLUMNS,
-            rows=rows,
-        )
+    save(
+        a.json,
+        measured=f"one run, variants one after the other, serial; also in {a.output / 'local_wss.json'}",
+        columns=JSON_COLUMNS,
+        rows=rows,
+    )
     return 0
 
 

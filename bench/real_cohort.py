@@ -28,6 +28,8 @@ import time
 from datetime import date
 from pathlib import Path
 
+from _table import emit  # bench/ is on sys.path when this runs as a script
+
 REPO = Path(__file__).resolve().parents[1]
 JOBS = ("vcs_fit", "vcs_wall", "openfoam_case", "openfoam_solve", "fields_sample")
 
@@ -145,22 +147,14 @@ def main(argv: list[str] | None = None) -> int:
         ids = sheet(wd / "patients.tsv")
         r = run_workflow(wd, ["config.yaml"], "patients.tsv", a.cores, "real cohort, default config")
         res = wd / "results"
-        print("| " + " | ".join(COLUMNS) + " |")
-        print("|---" * 12 + "|")
-        rows = []
-        for pid in ids:
-            rows.append(cells(res, pid))
-            print("| " + " | ".join(rows[-1]) + " |")
-        if a.json:
-            from _table import command_line, write_table
-
-            write_table(
-                a.json,
-                command=command_line(),
-                measured=f"one run, default config/config.yaml, {a.cores} cores for Snakemake",
-                columns=COLUMNS[:-1],
-                rows=[c[:-1] for c in rows],
-            )
+        emit(
+            COLUMNS,
+            (cells(res, pid) for pid in ids),
+            a.json,
+            f"one run, default config/config.yaml, {a.cores} cores for Snakemake",
+            json_columns=COLUMNS[:-1],
+            json_row=lambda c: c[:-1],
+        )
         atlas = json.loads((res / "atlas" / "atlas.json").read_text())
         print(f"atlas: {len(atlas['patients_included'])} included, {len(atlas['patients_excluded'])} excluded")
     return 0 if r.returncode == 0 else 1

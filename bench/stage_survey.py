@@ -27,6 +27,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "bench"))
 sys.path.insert(0, str(REPO / "tests" / "vcs"))
+from _table import emit  # noqa: E402
 from real_cohort import real_rows, run_workflow, write_rows  # noqa: E402
 
 DATA = REPO.parent / "shared" / "data" / "vessels"
@@ -108,25 +109,14 @@ def main() -> None:
     res = wd / "results"
     atlas_file = res / "atlas" / "atlas.json"
     atlas = json.loads(atlas_file.read_text()) if atlas_file.exists() else {}
-    print("| " + " | ".join(COLUMNS) + " |")
-    print("|---|---|---|---|---|---|")
-    rows = []
-    for pid in ids:
-        try:
-            rows.append(cells(res, pid, atlas))
-        except FileNotFoundError as exc:
-            rows.append([pid, f"not finished ({exc.filename})", "", "", "", ""])
-        print("| " + " | ".join(rows[-1]) + " |")
-    if args.json:
-        from _table import command_line, write_table
 
-        write_table(
-            args.json,
-            command=command_line(),
-            measured="one run, default config/config.yaml",
-            columns=COLUMNS,
-            rows=rows,
-        )
+    def row(pid: str) -> list[str]:
+        try:
+            return cells(res, pid, atlas)
+        except FileNotFoundError as exc:
+            return [pid, f"not finished ({exc.filename})", "", "", "", ""]
+
+    emit(COLUMNS, (row(pid) for pid in ids), args.json, "one run, default config/config.yaml")
 
 
 if __name__ == "__main__":
