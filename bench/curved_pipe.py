@@ -3,7 +3,8 @@
 Ito (1959) and White (1929), on systematically refined meshes.
 
     .venv/bin/python bench/curved_pipe.py [-o results/verification] [--sizes 1.0,0.77,0.59]
-                                          [--layers 3] [--ranks 2] [--workdir DIR]
+                                          [--layers 3] [--also LAYERS:SIZES] [--ranks 2] [--workdir DIR]
+                                          [--json PATH]
 
 The torus-arc phantom (`vcs phantom --kind torus`: tube radius a = 5 mm, centreline radius
 R = 33.3 mm, a / R = 0.15, 300 degrees) goes through the normal pipeline: phantom STL -> `vcs fit`
@@ -17,7 +18,13 @@ next to the uniform outlet pressure), divided by the Hagen-Poiseuille gradient o
 rate: f_c / f_s, compared with Ito's and White's correlations (vcs.cfd.verification), with the
 observed order, Richardson extrapolation and GCI of Celik et al. 2008 (bench/grid_convergence.py).
 Writes OUT/curved_pipe.json and OUT/curved_pipe.png (local f_c / f_s along the arc); prints a
-table. The coarsest mesh is the one of tests/workflow/test_curved_pipe.py.
+table. The coarsest mesh is the one of tests/workflow/test_curved_pipe.py. ``--also 6:0.77,0.59``
+(repeatable) adds meshes at another prism-layer count after the series (not in its GCI);
+``--json PATH`` also writes the table of every mesh in the docs' format
+(docs/data/bench/curved_pipe.json):
+
+    .venv/bin/python bench/curved_pipe.py --sizes 1.0,0.77,0.59,0.45 --also 6:0.77,0.59 \
+        --json docs/data/bench/curved_pipe.json
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _table import save  # bench/ is on sys.path when this runs as a script
 from grid_convergence import gci
 
 from vcs.cfd import render_case, run_case, sample_case
@@ -48,6 +56,21 @@ from vcs.vessel import fit_vessel
 A_MM, R_MM, ARC_DEG = 5.0, 33.3, 300.0  # tube radius, centreline radius, arc
 RE, NU = 500.0, 3.37e-6
 WINDOW_DEG = (90.0, 270.0)  # developed part: away from the inlet (development) and the outlet
+LAYERS = 3  # the default mesh's prism layers
+CI_CELL_MM = 1.0  # tests/workflow/test_curved_pipe.py's mesh (with LAYERS)
+#: the docs table's columns (docs/data/bench/curved_pipe.json)
+JSON_COLUMNS = [
+    "background cell",
+    "layers",
+    "cells",
+    "SIMPLE iterations",
+    "case s",
+    "f_c / f_s",
+    "vs White",
+    "vs Ito",
+    "mesh volume vs torus",
+    "f_c / f_s at the mesh's mean radius",
+]
 
 
 def flow_rate() -> float:
@@ -72,7 +95,7 @@ def friction_ratio(fields: dict, length_mm: float, window_deg: tuple[float, floa
 
 def run_mesh(work: Path, stl: Path, model, h_bg: float, ranks: int, layers: int) -> dict:
     """Render, mesh, solve and measure one mesh (a finished case in ``work`` is reused)."""
-    case = work / f"case_{h_bg * 1e3:.3f}mm"
+    case = work / (f"case_{h_bg * 1e3:.3f}mm" + ("" if layers == LAYERS else f"_{layers}layers"))
     cfg = {
         "mesh": {"cell_size": h_bg, "layers": layers},
         "physics": {"nu": NU},
@@ -96,6 +119,7 @@ def run_mesh(work: Path, stl: Path, model, h_bg: float, ranks: int, layers: int)
     volume_ratio = status["lumen_volume_m3"] / (np.pi * (A_MM * 1e-3) ** 2 * R_MM * 1e-3 * np.radians(ARC_DEG))
     return {
         "background_cell_mm": h_bg * 1e3,
+        "layers": layers,
         "cells": int(status["cells"]),
         "h": (status["lumen_volume_m3"] / status["cells"]) ** (1.0 / 3.0),
         "iterations": int(status["iterations"]),
@@ -107,6 +131,30 @@ def run_mesh(work: Path, stl: Path, model, h_bg: float, ranks: int, layers: int)
         "friction_ratio_mesh_radius": ratio * volume_ratio**2,
         "local_friction_ratio": local,
     }
+
+
+def json_cells(g: dict, ito: float, white: float) -> list[str]:
+    """One mesh of :func:`run_mesh` as a row of :data:`JSON_COLUMNS`."""
+    r = g["friction_ratio"]
+    ci = g["layers"] == LAYERS and round(g["background_cell_mm"], 6) == CI_CELL_MM
+    return [
+        f"{g['background_cell_mm']:.2f} mm" + (" (the CI test)" if ci else ""),
+        str(g["layers"]),
+        f"{g['cells']:,}",
+        str(g["iterations"]),
+        f"{g['solver_time_s']:.0f}",
+        f"{r:.3f}",
+        f"{100 * (r / white - 1):+.1f} %",
+        f"{100 * (r / ito - 1):+.1f} %",
+        f"{100 * (g['volume_ratio'] - 1):+.2f} %",
+        f"{g['friction_ratio_mesh_radius']:.3f}",
+    ]
+
+
+def parse_also(text: str) -> tuple[int, list[float]]:
+    """``LAYERS:SIZES`` (``6:0.77,0.59``, mm) as (layers, cell sizes in m, coarse to fine)."""
+    layers, _, sizes = text.partition(":")
+    return int(layers), sorted((float(x) * 1e-3 for x in sizes.split(",")), reverse=True)
 
 
 def plot(out: Path, grids: list[dict], ito: float, white: float) -> None:
@@ -138,13 +186,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-o", "--output", type=Path, default=Path("results/verification"), help="output folder")
     ap.add_argument("--sizes", default="1.0,0.77,0.59", help="background cell sizes [mm], coarse to fine")
     ap.add_argument("--ranks", type=int, default=2, help="MPI ranks per case")
-    ap.add_argument("--layers", type=int, default=3, help="wall prism layers (the default mesh has 3)")
+    ap.add_argument("--layers", type=int, default=LAYERS, help="wall prism layers (the default mesh has 3)")
+    ap.add_argument(
+        "--also",
+        action="append",
+        default=[],
+        metavar="LAYERS:SIZES",
+        help="more meshes after the series at another layer count, e.g. 6:0.77,0.59 (not in the GCI)",
+    )
     ap.add_argument("--workdir", type=Path, help="keep the cases here and reuse finished ones (default: temporary)")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     try:
         sizes = sorted((float(x) * 1e-3 for x in a.sizes.split(",")), reverse=True)
     except ValueError:
         print(f"curved_pipe: error: --sizes {a.sizes!r} is not a comma-separated list of mm", file=sys.stderr)
+        return 2
+    try:
+        also = [parse_also(x) for x in a.also]
+    except ValueError:
+        print(f"curved_pipe: error: --also {a.also!r}: each is LAYERS:SIZES, e.g. 6:0.77,0.59", file=sys.stderr)
         return 2
     a.output.mkdir(parents=True, exist_ok=True)
     de = dean_number(RE, A_MM, R_MM)
@@ -158,16 +219,16 @@ def main(argv: list[str] | None = None) -> int:
         model, _, _ = fit_vessel(work / "torus.stl", units="mm")
         stl = work / "wall.stl"
         write_multisolid_stl(wall_mesh(model, n_theta=64), stl, scale=1e-3)
-        grids = []
-        for h_bg in sizes:
-            g = run_mesh(work, stl, model, h_bg, a.ranks, a.layers)
+        grids, more = [], []
+        for layers, h_bg in [(a.layers, h) for h in sizes] + [(n, h) for n, hs in also for h in hs]:
+            g = run_mesh(work, stl, model, h_bg, a.ranks, layers)
             print(
                 f"background {g['background_cell_mm']:.3f} mm: {g['cells']:,} cells, {g['iterations']} iterations, "
                 f"f_c/f_s {g['friction_ratio']:.4f} (Ito {100 * (g['friction_ratio'] / ito - 1):+.2f} %), "
-                f"{g['time_s']:.0f} s",
+                f"{g['time_s']:.0f} s" + ("" if layers == a.layers else f" ({layers} layers)"),
                 flush=True,
             )
-            grids.append(g)
+            (grids if len(grids) < len(sizes) else more).append(g)
     result: dict = {
         "geometry": {
             "tube_radius_mm": A_MM,
@@ -184,6 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         "developed_window_deg": list(WINDOW_DEG),
         "order": "coarse to fine",
         "meshes": grids,
+        **({"more_meshes": more} if more else {}),
         "total_time_s": round(time.perf_counter() - t_start, 1),
     }
     if len(grids) >= 3:  # the three finest
@@ -206,10 +268,12 @@ def main(argv: list[str] | None = None) -> int:
         "| mesh volume / torus | f_c/f_s at the mesh's radius |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
-    for g in grids:
+    for g in grids + more:
         r = g["friction_ratio"]
+        layers = "" if g["layers"] == a.layers else f", {g['layers']} layers"
         print(
-            f"| {g['background_cell_mm']:.2f} mm | {g['cells']:,} | {g['iterations']} | {g['solver_time_s']:.0f} | "
+            f"| {g['background_cell_mm']:.2f} mm{layers} | {g['cells']:,} | {g['iterations']} | "
+            f"{g['solver_time_s']:.0f} | "
             f"{r:.4f} | {100 * (r / ito - 1):+.2f} % | {100 * (r / white - 1):+.2f} % | "
             f"{100 * (g['volume_ratio'] - 1):+.2f} % | {g['friction_ratio_mesh_radius']:.4f} |"
         )
@@ -226,6 +290,13 @@ def main(argv: list[str] | None = None) -> int:
                 "range, no Richardson value; the spread of the finest meshes is the uncertainty"
             )
     print(f"total {result['total_time_s']:.0f} s -> {a.output / 'curved_pipe.json'}")
+    save(
+        a.json,
+        measured=f"one run, {result['total_time_s']:.0f} s wall, {a.ranks} MPI ranks per case; "
+        f"also in {a.output / 'curved_pipe.json'}",
+        columns=JSON_COLUMNS,
+        rows=[json_cells(g, ito, white) for g in grids + more],
+    )
     return 0
 
 

@@ -5,6 +5,8 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))  # the bench scripts and their shared table writer: _table
 
@@ -47,3 +49,31 @@ def test_emit_without_a_path_only_prints(tmp_path, capsys, monkeypatch):
 def test_save_names_this_process_command_by_default(tmp_path):
     path = _table.save(tmp_path / "t.json", columns=["a"], rows=[["1"]], measured="m")
     assert json.loads(path.read_text())["command"] == _table.command_line()
+
+
+def docs_table(name: str) -> dict:
+    return json.loads((ROOT / "docs" / "data" / "bench" / f"{name}.json").read_text())
+
+
+def test_curved_pipe_writes_the_docs_row_of_its_figures():
+    import curved_pipe as cp
+
+    from vcs.cfd.verification import dean_number, ito_friction_ratio, white_friction_ratio
+
+    docs = docs_table("curved_pipe")
+    assert cp.JSON_COLUMNS == docs["columns"]
+    de = dean_number(cp.RE, cp.A_MM, cp.R_MM)
+    ito, white = ito_friction_ratio(de), white_friction_ratio(de)
+    g = {  # the CI mesh's figures of the transcribed run
+        "background_cell_mm": 1.0,
+        "layers": 3,
+        "cells": 26948,
+        "iterations": 256,
+        "solver_time_s": 328.4,
+        "friction_ratio": 1.902,
+        "volume_ratio": 1 - 0.0108,
+        "friction_ratio_mesh_radius": 1.861,
+    }
+    assert cp.json_cells(g, ito, white) == docs["rows"][0]
+    assert cp.json_cells({**g, "layers": 6}, ito, white)[:2] == ["1.00 mm", "6"]
+    assert cp.parse_also("6:0.59,0.77") == (6, pytest.approx([0.77e-3, 0.59e-3]))
