@@ -77,3 +77,25 @@ def test_curved_pipe_writes_the_docs_row_of_its_figures():
     assert cp.json_cells(g, ito, white) == docs["rows"][0]
     assert cp.json_cells({**g, "layers": 6}, ito, white)[:2] == ["1.00 mm", "6"]
     assert cp.parse_also("6:0.59,0.77") == (6, pytest.approx([0.77e-3, 0.59e-3]))
+
+
+def test_pulsatile_womersley_writes_the_docs_row_of_its_figures():
+    import pulsatile_womersley as pw
+
+    docs = docs_table("pulsatile_womersley")
+    assert pw.COLUMNS == docs["columns"]
+    r = {  # the T / 800 run of the transcribed table
+        "cell_mm": 0.75,
+        "min_steps_per_cycle": 800,
+        "cells": 14233,
+        "steps_per_cycle": 804.3,
+        "cpu_s_per_cycle": 107.2,
+        "centreline": {"mean_rel": -0.0018, "amplitude_rel": -0.0009, "phase_deg": 0.11},
+        "wss": {"mean_rel": 0.0114, "amplitude_rel": -0.0381, "phase_deg": -1.12},
+        "tawss_rel": -0.0333,
+        "osi": 0.3186,
+        "osi_exact": 0.3284,
+    }
+    assert pw.cells(r) == docs["rows"][2]
+    assert pw.cells({**r, "min_steps_per_cycle": 200})[0] == "0.75"
+    assert pw.parse_also("0.75:800") == (0.75, 800)
