@@ -9,7 +9,10 @@ Target: parallel efficiency >= 0.9 on 2 cores (one serial case per core).
     .venv/bin/python bench/bench_cohort.py --n 8 --configfile config/config.yaml
 
 The phantoms (vcs_phantom) are generated before the timed run, so that the timed run is the
-per-patient chain + atlas only. Runs in a fresh directory (default: a temporary one).
+per-patient chain + atlas only. Runs in a fresh directory (default: a temporary one). ``--json
+PATH`` also writes the per-patient table in the docs' format, with each patient's cell size and
+prism-layer coverage (docs/data/bench/demo_cohort.json: the demo cohort, ``--n 8 --configfile
+config/config.yaml``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import time
 from pathlib import Path
 
 import yaml
+from _table import save  # bench/ is on sys.path when this runs as a script
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = Path(sys.executable).parent / "snakemake"
@@ -44,6 +48,43 @@ def read_statuses(results: Path) -> dict[str, dict]:
     return {p.parent.name: json.loads(p.read_text()) for p in sorted((results / "patients").glob("*/status.json"))}
 
 
+#: the docs table's columns (docs/data/bench/demo_cohort.json)
+JSON_COLUMNS = [
+    "patient",
+    "cell mm (auto)",
+    "cells",
+    "layer coverage",
+    "snappyHexMesh s",
+    "SIMPLE iterations",
+    "simpleFoam s",
+    "converged",
+    "resampling s",
+    "resampling / solver",
+]
+
+
+def json_cells(pid: str, st: dict, sample: float | None) -> list[str]:
+    """One patient's row of :data:`JSON_COLUMNS` from its status.json and its resampling job's
+    seconds (the fields_sample benchmark; None: none)."""
+    t = st.get("timings_s", {})
+    mesh = st.get("mesh") or {}
+    size = ((mesh.get("sizing") or {}).get("cell_size") or {}).get("cell_size_m")
+    coverage = (mesh.get("layers") or {}).get("coverage")
+    solver = sum(float(v) for k, v in t.items() if k.startswith("simpleFoam"))
+    return [
+        pid,
+        "-" if size is None else f"{size * 1e3:.3g}",
+        f"{st.get('cells') or 0:,}",
+        "-" if coverage is None else f"{coverage:.2f}",
+        f"{float(t.get('snappyHexMesh') or 0.0):.1f}",
+        str(st.get("iterations")),
+        f"{solver:.1f}",
+        "yes" if st.get("converged") else "NO: " + str(st.get("reason")),
+        "-" if sample is None else f"{sample:.1f}",
+        f"{100 * sample / solver:.0f} %" if sample is not None and solver > 0 else "-",
+    ]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4, help="patients (aorta phantoms, seeds 0..n-1)")
@@ -54,6 +95,7 @@ def main(argv=None) -> int:
         help="config merged over config/config.yaml (default: the CI-sized config/ci.yaml)",
     )
     ap.add_argument("--workdir", help="run here instead of a temporary directory (kept)")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the per-patient table as docs JSON")
     args = ap.parse_args(argv)
 
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_cohort_")).resolve()
@@ -124,6 +166,16 @@ def main(argv=None) -> int:
             f"| {pid} | {st.get('cells')} | {snappy:.1f} | {st.get('iterations')} | {solver:.1f} | "
             f"{st.get('converged')} | {sample if sample is None else round(sample, 1)} | {ratio} |"
         )
+    config_name = Path(args.configfile).resolve()
+    if config_name.is_relative_to(REPO):
+        config_name = config_name.relative_to(REPO)
+    save(
+        args.json,
+        measured=f"one run, {args.n} patients, {args.cores} cores, config/config.yaml + {config_name}; "
+        f"{wall:.0f} s wall, parallel efficiency {ideal / wall:.2f}",
+        columns=JSON_COLUMNS,
+        rows=[json_cells(pid, st, bench.get("fields_sample", {}).get(pid)) for pid, st in statuses.items()],
+    )
     return r.returncode
 
 

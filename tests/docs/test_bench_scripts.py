@@ -99,3 +99,19 @@ def test_pulsatile_womersley_writes_the_docs_row_of_its_figures():
     assert pw.cells(r) == docs["rows"][2]
     assert pw.cells({**r, "min_steps_per_cycle": 200})[0] == "0.75"
     assert pw.parse_also("0.75:800") == (0.75, 800)
+
+
+def test_bench_cohort_writes_the_docs_row_of_a_status():
+    import bench_cohort as bc
+
+    docs = docs_table("demo_cohort")
+    assert bc.JSON_COLUMNS == docs["columns"]
+    st = {  # aorta_0 of the transcribed demo run
+        "cells": 60031,
+        "iterations": 169,
+        "converged": True,
+        "mesh": {"sizing": {"cell_size": {"cell_size_m": 2.08e-3}}, "layers": {"coverage": 0.991}},
+        "timings_s": {"snappyHexMesh": 14.61, "simpleFoam.startup": 2.1, "simpleFoam": 27.2, "total": 50.0},
+    }
+    assert bc.json_cells("aorta_0", st, 3.6) == docs["rows"][0]
+    assert bc.json_cells("x", {"converged": False, "reason": "why"}, None)[-3:] == ["NO: why", "-", "-"]
