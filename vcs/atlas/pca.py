@@ -204,6 +204,23 @@ class PCA:
         VCSInputError
             ``X`` is not 2-D, has fewer than 2 samples, or holds non-finite values (all its columns
             do, with ``drop_non_finite``).
+
+        Examples
+        --------
+        Six samples on a line in 3-D: one mode along it explains all the variance and rebuilds
+        every sample.
+
+        >>> import numpy as np
+        >>> from vcs.atlas import PCA
+        >>> t = np.array([-2.0, -1.0, 0.0, 0.5, 1.0, 1.5])
+        >>> X = np.array([10.0, 0.0, -1.0]) + t[:, None] * np.array([1.0, 2.0, 2.0])
+        >>> pca = PCA.from_data(X, n_modes=1)
+        >>> pca.components.round(6)
+        array([[0.333333, 0.666667, 0.666667]])
+        >>> round(float(pca.explained_variance_ratio[0]), 9)
+        1.0
+        >>> bool(np.allclose(pca.inverse_transform(pca.transform(X)), X, atol=1e-12))
+        True
         """
         X = np.asarray(X, float)
         if X.ndim != 2 or len(X) < 2:
