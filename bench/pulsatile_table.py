@@ -3,11 +3,13 @@
 periodicity, the last cycle-to-cycle changes and the TAWSS / OSI ranges on the VCS grid.
 
     .venv/bin/python bench/bench_cohort.py --n 2 --configfile config/pulsatile.yaml --workdir W
-    .venv/bin/python bench/pulsatile_table.py W/results [--json out.json]
+    .venv/bin/python bench/pulsatile_table.py W/results [--rows-json out.json] [--json PATH]
 
 Reads results/patients/<id>/status.json (``pulsatile``, ``cells``) and fields.npz (TAWSS, OSI,
 RRT, ECAP on the grid: 5th-95th percentiles). CPU per cycle is pimpleFoam's ExecutionTime summed
 over the cycle's runs (x ranks); the README's pulsatile table is this script's output.
+``--rows-json`` writes the rows read, ``--json PATH`` the table in the docs' format
+(docs/data/bench/pulsatile_cost.json).
 """
 
 from __future__ import annotations
@@ -20,6 +22,20 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _table import emit  # bench/ is on sys.path when this runs as a script
+
+#: the table's columns (as printed and in the docs JSON)
+COLUMNS = [
+    "patient",
+    "cells",
+    "dt (ms)",
+    "steps/cycle",
+    "CPU s/cycle",
+    "cycles",
+    "last change dp/flow/TAWSS %",
+    "TAWSS 5-95% (Pa)",
+    "OSI 5-95%",
+]
 
 
 def patient_row(pid: str, folder: Path) -> dict | None:
@@ -56,35 +72,46 @@ def patient_row(pid: str, folder: Path) -> dict | None:
     return row
 
 
+def cells(r: dict) -> list[str]:
+    """One row of :func:`patient_row` as cells of :data:`COLUMNS`."""
+    ch = r["last_change"]
+    ch_txt = "-" if not ch else f"{100 * ch['dp']:.2g} / {100 * ch['flow']:.2g} / {100 * ch['tawss']:.2g}"
+    dt = f"{1e3 * r['dt_min_s']:.3g}-{1e3 * r['dt_max_s']:.3g}" if r["dt_min_s"] else "-"
+    ta = "-" if not r.get("TAWSS") else f"{r['TAWSS'][0]:.2g}-{r['TAWSS'][1]:.2g}"
+    osi = "-" if not r.get("OSI") else f"{r['OSI'][0]:.2g}-{r['OSI'][1]:.2g}"
+    return [
+        r["id"],
+        f"{r['cells']}",
+        dt,
+        f"{r['steps_per_cycle']:.0f}",
+        f"{r['cpu_s_per_cycle']:.0f}",
+        f"{r['cycles_run']}{'' if r['converged'] else ' (not periodic)'}",
+        ch_txt,
+        ta,
+        osi,
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", help="a results folder (results/patients/<id>/...)")
-    ap.add_argument("--json", help="also write the rows here")
+    ap.add_argument("--rows-json", help="also write the rows read here")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     args = ap.parse_args(argv)
     patients = Path(args.results) / "patients"
     rows = [r for d in sorted(patients.iterdir()) if (r := patient_row(d.name, d))]
     if not rows:
         print(f"no pulsatile status.json under {patients}", file=sys.stderr)
         return 1
-    head = (
-        "| patient | cells | dt (ms) | steps/cycle | CPU s/cycle | cycles | last change dp/flow/TAWSS % "
-        "| TAWSS 5-95% (Pa) | OSI 5-95% |"
+    emit(
+        COLUMNS,
+        (cells(r) for r in rows),
+        args.json,
+        f"read from {args.results} after its run (the date and load: the reading's)",
     )
-    print(head)
-    print("|---|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        ch = r["last_change"]
-        ch_txt = "-" if not ch else f"{100 * ch['dp']:.2g} / {100 * ch['flow']:.2g} / {100 * ch['tawss']:.2g}"
-        dt = f"{1e3 * r['dt_min_s']:.3g}-{1e3 * r['dt_max_s']:.3g}" if r["dt_min_s"] else "-"
-        ta = "-" if not r.get("TAWSS") else f"{r['TAWSS'][0]:.2g}-{r['TAWSS'][1]:.2g}"
-        osi = "-" if not r.get("OSI") else f"{r['OSI'][0]:.2g}-{r['OSI'][1]:.2g}"
-        print(
-            f"| {r['id']} | {r['cells']} | {dt} | {r['steps_per_cycle']:.0f} | {r['cpu_s_per_cycle']:.0f} | "
-            f"{r['cycles_run']}{'' if r['converged'] else ' (not periodic)'} | {ch_txt} | {ta} | {osi} |"
-        )
     print(f"machine: {platform.node()} {os.cpu_count()} cores, {platform.processor() or platform.machine()}")
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
+    if args.rows_json:
+        Path(args.rows_json).write_text(json.dumps(rows, indent=1))
     return 0
 
 

@@ -115,3 +115,25 @@ def test_bench_cohort_writes_the_docs_row_of_a_status():
     }
     assert bc.json_cells("aorta_0", st, 3.6) == docs["rows"][0]
     assert bc.json_cells("x", {"converged": False, "reason": "why"}, None)[-3:] == ["NO: why", "-", "-"]
+
+
+def test_pulsatile_table_writes_the_docs_row_of_a_patient():
+    import pulsatile_table as pt
+
+    docs = docs_table("pulsatile_cost")
+    assert pt.COLUMNS == docs["columns"]
+    r = {  # aorta_0 of the transcribed run
+        "id": "aorta_0",
+        "converged": True,
+        "cells": 60043,
+        "cycles_run": 3,
+        "dt_min_s": 0.132e-3,
+        "dt_max_s": 4.04e-3,
+        "steps_per_cycle": 501.0,
+        "cpu_s_per_cycle": 401.3,
+        "last_change": {"dp": 0.0011, "flow": 1.4e-7, "tawss": 0.048},
+        "TAWSS": [0.49, 1.5],
+        "OSI": [0.1, 0.45],
+    }
+    assert pt.cells(r) == docs["rows"][0]
+    assert pt.cells({**r, "converged": False})[5] == "3 (not periodic)"
