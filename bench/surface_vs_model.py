@@ -4,7 +4,7 @@
 branch an outlet), side by side on the VCS grid.
 
     .venv/bin/snakemake --profile profiles/local --config patients=config/real_surface_patients.tsv
-    .venv/bin/python bench/surface_vs_model.py results [--json out.json]
+    .venv/bin/python bench/surface_vs_model.py results [--rows-json out.json] [--json PATH]
 
 Pairs ``<name>_model`` / ``<name>_surface`` of results/patients/. Per pair: cells, convergence,
 the inlet-main outlet pressure difference (status.json), the branches' share of the inflow, and
@@ -12,7 +12,8 @@ per tau band (ascending 0-0.25, arch 0.25-0.5, proximal descending 0.5-0.75, dis
 0.75-1) the mean WSS magnitude on the wall grid (fields.npz ``WSS``; for a steady run that settled
 in time, its time average), over the wall points that both runs have (the ostia of the surface run
 are left out of both: fields.npz ``ostium``), and its relative change. The README's model / surface
-table is this script's output.
+table is this script's output. ``--rows-json`` writes the comparisons, ``--json PATH`` the table in
+the docs' format (docs/data/bench/surface_vs_model.json).
 """
 
 from __future__ import annotations
@@ -25,8 +26,26 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _table import save  # bench/ is on sys.path when this runs as a script
 
 BANDS = {"ascending": (0.0, 0.25), "arch": (0.25, 0.5), "desc. prox.": (0.5, 0.75), "desc. dist.": (0.75, 1.0)}
+#: the docs table's columns (docs/data/bench/surface_vs_model.json): the bands by their tau
+JSON_COLUMNS = [
+    "patient",
+    "cells model / surface",
+    "outlets (branches, their share)",
+    "dp Pa model / surface",
+    "WSS tau 0-0.25 Pa model / surface",
+    "tau 0.25-0.5",
+    "tau 0.5-0.75",
+    "tau 0.75-1",
+]
+#: the patients of config/real_surface_patients.tsv by name in the docs table
+LABELS = {
+    "aortacfd_patient1": "AortaCFD patient1 (coarctation)",
+    "vmr0154": "VMR 0154",
+    "simvascular_capped": "SimVascular segment (no branches)",
+}
 
 
 def _load(folder: Path) -> tuple[dict, dict] | None:
@@ -77,6 +96,22 @@ def pair_row(name: str, model: tuple[dict, dict], surface: tuple[dict, dict]) ->
     }
 
 
+def json_cells(r: dict) -> list[str]:
+    """One comparison of :func:`pair_row` as a row of :data:`JSON_COLUMNS`."""
+    c, d = r["cells"], r["dp_pa"]
+    share = f"{100 * r['branch_fraction']:.1f} %" if r["branches"] else "0 %"
+    return [
+        LABELS.get(r["patient"], r["patient"]),
+        f"{c['model']:,} / {c['surface']:,}",
+        f"{r['outlet_type']} ({r['branches']}, {share})",
+        " / ".join("-" if d[k] is None else f"{d[k]:.0f}" for k in ("model", "surface")),
+        *(
+            f"{x['model_pa']:.2f} / {x['surface_pa']:.2f} ({100 * x['change']:+.0f} %)"
+            for x in (r["bands"][band] for band in BANDS)
+        ),
+    ]
+
+
 def table(rows: list[dict]) -> str:
     """Markdown: one row per patient."""
     head = "| patient | cells model / surface | outlets (branches, their share) | dp Pa model / surface |"
@@ -97,7 +132,8 @@ def table(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("results", type=Path, help="a results folder (results/patients/<name>_model, <name>_surface)")
-    ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
+    ap.add_argument("--rows-json", type=Path, default=None, help="also write the comparisons as JSON")
+    ap.add_argument("--json", type=Path, metavar="PATH", help="also write the table as docs JSON")
     a = ap.parse_args(argv)
     pts = a.results / "patients"
     names = sorted(
@@ -120,8 +156,14 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['wall_points_compared']} wall points compared"
         )
     print(table(rows))
-    if a.json:
-        a.json.write_text(json.dumps(rows, indent=2) + "\n")
+    if a.rows_json:
+        a.rows_json.write_text(json.dumps(rows, indent=2) + "\n")
+    save(
+        a.json if rows else None,
+        measured=f"read from {a.results} after its run (the date and load: the reading's)",
+        columns=JSON_COLUMNS,
+        rows=[json_cells(r) for r in rows],
+    )
     return 0 if rows else 1
 
 

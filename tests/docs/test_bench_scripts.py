@@ -137,3 +137,22 @@ def test_pulsatile_table_writes_the_docs_row_of_a_patient():
     }
     assert pt.cells(r) == docs["rows"][0]
     assert pt.cells({**r, "converged": False})[5] == "3 (not periodic)"
+
+
+def test_surface_vs_model_writes_the_docs_row_of_a_pair():
+    import surface_vs_model as svm
+
+    docs = docs_table("surface_vs_model")
+    assert svm.JSON_COLUMNS == docs["columns"]
+    bands = [(0.481, 0.480, -0.002), (1.32, 1.13, -0.14), (1.35, 1.07, -0.20), (1.26, 1.00, -0.21)]
+    r = {  # VMR 0154 of the transcribed run
+        "patient": "vmr0154",
+        "cells": {"model": 32893, "surface": 32044},
+        "dp_pa": {"model": 84.2, "surface": 56.3},
+        "branches": 4,
+        "branch_fraction": 0.165,
+        "outlet_type": "murray",
+        "bands": {b: {"model_pa": m, "surface_pa": s, "change": c} for b, (m, s, c) in zip(svm.BANDS, bands)},
+    }
+    assert svm.json_cells(r) == docs["rows"][1]
+    assert svm.json_cells({**r, "branches": 0, "branch_fraction": 0.0})[2] == "murray (0, 0 %)"
