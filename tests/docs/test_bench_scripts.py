@@ -156,3 +156,14 @@ def test_surface_vs_model_writes_the_docs_row_of_a_pair():
     }
     assert svm.json_cells(r) == docs["rows"][1]
     assert svm.json_cells({**r, "branches": 0, "branch_fraction": 0.0})[2] == "murray (0, 0 %)"
+
+
+def test_ci_layers_writes_the_docs_row_of_both_runs():
+    import ci_layers
+
+    docs = docs_table("ci_layers")
+    assert ci_layers.COLUMNS == docs["columns"]
+    off = {"cells": 11855, "iterations": 99, "timings_s": {"total": 62.91}}
+    on = {"cells": 21859, "iterations": 105, "mesh": {"layers": {"coverage": 0.99}}, "timings_s": {"total": 33.2}}
+    assert ci_layers.cells("demo_aorta_0", off, on) == docs["rows"][0]
+    assert ci_layers.cells("x", None, on)[1:4] == ["-", "21,859 (0.99)", "- / 105"]
