@@ -841,7 +841,7 @@ def test_jet_transient_resampled_from_the_means(jet_transient):
 @needs_foam
 def test_jet_transient_too_short_window_is_not_stationary(tmp_path):
     """A longest window of 1/50 flow-through right after 3 SIMPLE iterations: its means are not
-    known to the tolerance (the flow still starts up: fewer than 5 batches of 5 integral time
+    known to the tolerance (the flow still starts up: fewer than 3 batches of 3 integral time
     scales, a range far wider than 3 %); converged false with the reason naming the error bars and
     what to change (run in parallel: decomposed transient stages, the Courant numbers and probe
     cells read from the processors, reconstructPar of the end)."""

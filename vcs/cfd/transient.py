@@ -661,7 +661,7 @@ def window_statistics(
 
     For each record (inlet-outlet pressure difference, area-mean |WSS| on the wall, and the
     velocity at the probe cells), the mean and the half-width of its confidence interval
-    (:func:`vcs.cfd.timeseries.mean_error`: batch means over at least 5 batches of 3 integral time
+    (:func:`vcs.cfd.timeseries.mean_error`: batch means over at least 3 batches of 3 integral time
     scales, and the integral-time-scale estimate 2 T_int sigma^2 / T, the larger; or the record's
     range when smaller). Relative half-widths:
 
