@@ -11,7 +11,7 @@ export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM
 code=(vcs tests bench scripts workflow/scripts setup.py)
 # modules whose docstrings hold runnable examples (numpydoc "Examples" sections)
 doctest_modules=(vcs/grid.py vcs/model.py vcs/vessel.py vcs/phantoms/factory.py vcs/atlas/pca.py vcs/atlas/cohort.py
-  vcs/cfd/markers.py vcs/cfd/verification.py)
+  vcs/cfd/markers.py vcs/cfd/verification.py vcs/cfd/utilities.py)
 echo "[test] ruff check + ruff format --check"
 .venv/bin/ruff check --quiet "${code[@]}"
 .venv/bin/ruff format --check --quiet "${code[@]}"
