@@ -60,11 +60,15 @@ def sheet(dst: Path) -> list[str]:
     return write_rows(dst, real_rows())
 
 
-def run_workflow(wd: Path, configs: list[str], patients: str, cores: int, title: str) -> subprocess.CompletedProcess:
+def run_workflow(
+    wd: Path, configs: list[str], patients: str, cores: int, title: str, targets: list[str] | None = None
+) -> subprocess.CompletedProcess:
     """Run the workflow in ``wd`` (config/<configs> merged in order, the patients sheet
-    ``patients``, the local profile) and print one line: title, date, machine, load, exit, wall."""
+    ``patients``, the local profile; ``targets``, default: all) and print one line: title, date,
+    machine, load, exit, wall."""
     cmd = [
         str(Path(sys.executable).parent / "snakemake"),
+        *(targets or []),
         *("-s", str(REPO / "Snakefile"), "-d", str(wd), "--configfile"),
         *(str(REPO / "config" / c) for c in configs),
         *("--config", f"patients={patients}", "--profile", str(REPO / "profiles" / "local")),

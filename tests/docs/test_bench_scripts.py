@@ -167,3 +167,39 @@ def test_ci_layers_writes_the_docs_row_of_both_runs():
     on = {"cells": 21859, "iterations": 105, "mesh": {"layers": {"coverage": 0.99}}, "timings_s": {"total": 33.2}}
     assert ci_layers.cells("demo_aorta_0", off, on) == docs["rows"][0]
     assert ci_layers.cells("x", None, on)[1:4] == ["-", "21,859 (0.99)", "- / 105"]
+
+
+def test_outlets_rcr_writes_the_docs_rows_of_its_figures():
+    import outlets_rcr
+
+    docs = docs_table("outlets_verification")
+    assert outlets_rcr.JSON_COLUMNS == docs["columns"]
+    ci = {"steady": {"rel": -1.0e-9}, "rcr": {100: {"of_max": 0.0032, "backward_euler": 2.6e-7}}}
+    bench = {
+        "steady": {"rel": 2.9e-9, "cells": 8520},
+        "rcr": {100: {"of_max": 0.0056, "backward_euler": 1.3e-5}, 200: {"of_max": 0.0027, "backward_euler": 4e-6}},
+    }
+    murray = {"target": 0.7031, "error": 0.0042, "mass_balance": 2.1e-8}
+    bif = {  # the vmtk bifurcation's status.json of the transcribed run
+        "cells": 52843,
+        "converged": True,
+        "criterion_used": "residualControl",
+        "iterations": 352,
+        "inflow": {"flow_rate_l_min": 1.88},
+        "timings_s": {"total": 201.2},
+        "outlet_mass_balance": {"relative": -3.9e-8},
+        "outlets": [
+            {"name": "outlet", "fraction": 0.5071512, "target_fraction": 0.5071509},
+            {"name": "branch_1", "fraction": 0.4928488, "target_fraction": 0.4928491},
+        ],
+    }
+    rows = outlets_rcr.table_rows(ci, bench, murray, bif)
+    assert [r[1] for r in rows[:1] + rows[2:3] + rows[4:]] == [
+        r[1] for r in docs["rows"][:1] + docs["rows"][2:3] + docs["rows"][4:]
+    ]
+    assert rows[1][1].startswith("0.32 % of the largest pressure (CI); 0.56 % / 0.27 % at 100 / 200 steps per cycle")
+    assert rows[3] == [
+        "murray, split-end tube (target 0.703), steady and every instant of a pulsatile inflow",
+        "within 0.42 %, mass balance 2.1e-8",
+    ]
+    assert len(outlets_rcr.table_rows(ci, bench, murray)) == 4
