@@ -203,3 +203,29 @@ def test_outlets_rcr_writes_the_docs_rows_of_its_figures():
         "within 0.42 %, mass balance 2.1e-8",
     ]
     assert len(outlets_rcr.table_rows(ci, bench, murray)) == 4
+
+
+def test_mesh_size_writes_the_docs_row_of_a_meshed_case():
+    import mesh_size
+
+    docs = docs_table("mesh_size_real")
+    assert mesh_size.COLUMNS == docs["columns"]
+    h, pad, n = 0.833e-3, 4, (112, 67, 67)  # 502,768 background cells at the lumen cell size
+    state = {  # the helix phantom of the transcribed run
+        "stl_bounds": [[0.0, 0.0, 0.0], [(k - 2 * pad) * h for k in n]],
+        "cfd": {"mesh": {"pad_cells": pad}},
+        "inflow": {"flow_rate_l_min": 0.7951},
+        "mesh_sizing": {
+            "cell_size_m": h,
+            "cell_size": {"governed_by": "smallest end"},
+            "vessel": {"inlet_diameter_m": 10.0e-3, "outlet_diameter_m": 10.01e-3, "narrowest_diameter_m": 9.996e-3},
+            "background": {"level_offset": 1, "background_cells": 80771},
+        },
+    }
+    st = {
+        "state": state,
+        "cells": 53248,
+        "timings_s": {"snappyHexMesh": 16.81},
+        "mesh": {"patches": {"wall": {"faces": 7729}, "inlet": {"faces": 601}, "outlet": {"faces": 186}}},
+    }
+    assert mesh_size.cells("helix_phantom", st, 14.0)[1:] == docs["rows"][3][1:]
