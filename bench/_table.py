@@ -117,6 +117,20 @@ def write_table(
     return path
 
 
+def sig(x: float, digits: int = 2) -> str:
+    """``x`` to ``digits`` significant digits, an exponent as people write it: ``1e-9``, ``1.2e-4``
+    (``f"{x:.2g}"`` gives ``1e-09``, ``0.00012``)."""
+    s = f"{x:.{digits}g}"
+    if "e" not in s and x != 0 and abs(x) < 1e-3:
+        s = f"{x:.{digits - 1}e}"
+    if "e" in s:
+        mantissa, exponent = s.split("e")
+        if "." in mantissa:
+            mantissa = mantissa.rstrip("0").rstrip(".")
+        s = f"{mantissa}e{int(exponent)}"
+    return s
+
+
 def markdown_row(cells: Sequence[str]) -> str:
     """One row of a markdown table: ``| a | b |``."""
     return "| " + " | ".join(cells) + " |"

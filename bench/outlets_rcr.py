@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _table import save  # bench/ is on sys.path when this runs as a script
+from _table import save, sig  # bench/ is on sys.path when this runs as a script
 
 from vcs.cfd import render_case, run_case
 from vcs.cfd.foamfiles import function_series
@@ -136,15 +136,6 @@ def bifurcation(wd: Path, cores: int) -> dict:
     return json.loads((wd / target).read_text())
 
 
-def _g(x: float, digits: int = 2) -> str:
-    """``x`` to ``digits`` significant digits, exponents as 1e-9 (not 1e-09)."""
-    s = f"{x:.{digits}g}"
-    if "e" in s:
-        mantissa, exponent = s.split("e")
-        s = f"{mantissa}e{int(exponent)}"
-    return s
-
-
 def table_rows(ci: dict, bench: dict, murray: dict, bif: dict | None = None) -> list[list[str]]:
     """The rows of :data:`JSON_COLUMNS`: ``ci`` and ``bench`` hold ``steady`` (of
     :func:`steady_resistance`) and ``rcr`` ({steps per cycle: :func:`rcr_pulsatile`}), ``murray``
@@ -158,7 +149,7 @@ def table_rows(ci: dict, bench: dict, murray: dict, bif: dict | None = None) -> 
     rows = [
         [
             "resistance outlet, steady tube: p = R Q",
-            f"{_g(abs(ci['steady']['rel']))} (CI), {_g(abs(bench['steady']['rel']))} "
+            f"{sig(abs(ci['steady']['rel']))} (CI), {sig(abs(bench['steady']['rel']))} "
             f"(bench, {bench['steady']['cells']:,} cells)",
         ],
         [
@@ -170,12 +161,12 @@ def table_rows(ci: dict, bench: dict, murray: dict, bif: dict | None = None) -> 
         ],
         [
             "same, against the backward-Euler recurrence (once per step, across restarts)",
-            f"{_g(ci_rcr['backward_euler'])} (CI), "
-            f"{_g(max(r['backward_euler'] for r in bench['rcr'].values()))} (bench)",
+            f"{sig(ci_rcr['backward_euler'])} (CI), "
+            f"{sig(max(r['backward_euler'] for r in bench['rcr'].values()))} (bench)",
         ],
         [
             f"murray, split-end tube (target {murray['target']:.3f}), steady and every instant of a pulsatile inflow",
-            f"within {100 * murray['error']:.2g} %, mass balance {_g(murray['mass_balance'])}",
+            f"within {100 * murray['error']:.2g} %, mass balance {sig(murray['mass_balance'])}",
         ],
     ]
     if bif is not None:
@@ -191,7 +182,7 @@ def table_rows(ci: dict, bench: dict, murray: dict, bif: dict | None = None) -> 
                 "without its cell size and flow rate; status.json `outlets`)",
                 f"branch {b.get('fraction', float('nan')):.6f} vs {b.get('target_fraction', float('nan')):.6f} "
                 f"target, main {m.get('fraction', float('nan')):.6f} vs {m.get('target_fraction', float('nan')):.6f}; "
-                f"mass balance {_g(abs((bif.get('outlet_mass_balance') or {}).get('relative', float('nan'))))}; "
+                f"mass balance {sig(abs((bif.get('outlet_mass_balance') or {}).get('relative', float('nan'))))}; "
                 f"{verdict} ({bif.get('criterion_used')}, {bif.get('iterations')} it., {wall or 0:.0f} s wall)",
             ]
         )

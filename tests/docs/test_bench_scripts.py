@@ -229,3 +229,64 @@ def test_mesh_size_writes_the_docs_row_of_a_meshed_case():
         "mesh": {"patches": {"wall": {"faces": 7729}, "inlet": {"faces": 601}, "outlet": {"faces": 186}}},
     }
     assert mesh_size.cells("helix_phantom", st, 14.0)[1:] == docs["rows"][3][1:]
+
+
+def test_sig_writes_exponents_as_people_do():
+    assert [_table.sig(x) for x in (1e-9, 1.2e-4, 0.0032, 12.4, 0.0009)] == ["1e-9", "1.2e-4", "0.0032", "12", "9e-4"]
+
+
+def test_paper_jet_writes_a_row_per_stage_of_a_status():
+    import paper_jet
+
+    docs = docs_table("paper_jet")
+    assert paper_jet.COLUMNS == docs["columns"]
+    st = {  # figures of the transcribed run, in today's status.json
+        "cells": 64979,
+        "iterations": 1000,
+        "converged": True,
+        "criterion_used": "time_average_stationary",
+        "final_residuals": {"p": 0.026, "U": 0.042},
+        "lumen_volume_m3": 207.8e-6,
+        "inflow": {"flow_rate_m3_s": 1.2e-4},
+        "mass_imbalance": 2.2e-9,
+        "timings_s": {"snappyHexMesh": 14.7},
+        "mesh": {
+            "jet_refinement": {"cells_across": 11.3},
+            "layers": {"requested": 3, "mean_layers": 2.97, "coverage": 0.99},
+        },
+        "transient": {
+            "flow_through_time_s": 1.73,
+            "washout_s": 1.74,
+            "washout_flow_throughs": 1.005,
+            "window_s": 17.32,
+            "window_flow_throughs": 10.01,
+            "time_steps": {"washout": 3154, "average": 31317},
+            "delta_t_s": {"min": 0.43e-3, "max": 0.63e-3},
+            "courant_max": 1.07,
+            "confidence": 0.95,
+            "relative_errors": {"inlet_minus_outlet_pressure": 0.0075, "tawss_mean": 0.029, "U": 0.087},
+            "tolerances": {"inlet_minus_outlet_pressure": 0.05, "tawss_mean": 0.05, "U": 0.1},
+        },
+        "inlet_minus_outlet_pressure": {"Pa": -133.6},
+        "wall_shear_stress_Pa": {"mean": 0.87, "max": 3.05},
+        "tawss_Pa": {"mean": 1.15, "max": 3.60},
+        "osi": {"mean": 0.14, "max": 0.48},
+    }
+    rows = dict(paper_jet.rows(st, {"simple": 166.0, "washout": 885.0, "average": 8036.0}))
+    assert rows["mesh"] == (
+        "64,979 cells (11.3 cells across the jet); 3 prism layers: mean 2.97, coverage 0.99; snappyHexMesh 14.7 s"
+    )
+    assert rows["SIMPLE"] == "1,000 iterations, 166 s CPU; not converged (last initial residuals p 0.026, U 0.042)"
+    assert rows["flow-through time"] == "lumen 207.8 cm3 / 1.2e-4 m3/s = 1.73 s"
+    assert rows["wash-out"] == "1.74 s (1 flow-throughs), 3,154 time steps, 885 s CPU"
+    assert rows["95 % half-widths of the window means"].startswith("inlet - outlet pressure 0.75 % (tolerance 5 %)")
+    assert rows["verdict"] == "`converged: true` (`time_average_stationary`)"
+    assert rows["window means"] == (
+        "mass imbalance 2.2e-9; inlet - outlet pressure -133.6 Pa; magnitude of the mean WSS 0.87 Pa (max 3.05); "
+        "TAWSS 1.15 Pa (max 3.6); OSI mean 0.14 (max 0.48)"
+    )
+    steady = {"cells": 1000, "iterations": 300, "converged": True, "criterion_used": "residualControl"}
+    assert paper_jet.rows(steady, {"simple": 20.0, "washout": 0.0, "average": 0.0})[1] == [
+        "SIMPLE",
+        "300 iterations, 20 s CPU; `residualControl`",
+    ]
