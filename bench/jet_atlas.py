@@ -52,12 +52,10 @@ COLUMNS = [
 ]
 
 
-def solver_cpu_s(case: Path) -> float:
-    """CPU seconds of the case's solvers: the last ExecutionTime of every simpleFoam / pimpleFoam log."""
+def execution_time(logs: list[Path]) -> float:
+    """CPU seconds of OpenFOAM runs: the sum of each log's last ExecutionTime (0 without one)."""
     total = 0.0
-    for log in sorted((case / "logs").glob("log.*Foam*")):
-        if log.name.split(".")[1] not in ("simpleFoam", "pimpleFoam"):
-            continue
+    for log in logs:
         last = None
         with open(log, errors="replace") as fh:
             for line in fh:
@@ -65,6 +63,12 @@ def solver_cpu_s(case: Path) -> float:
                     last = line
         total += float(last.split()[2]) if last else 0.0
     return total
+
+
+def solver_cpu_s(case: Path) -> float:
+    """CPU seconds of the case's solvers: the last ExecutionTime of every simpleFoam / pimpleFoam log."""
+    logs = sorted((case / "logs").glob("log.*Foam*"))
+    return execution_time([log for log in logs if log.name.split(".")[1] in ("simpleFoam", "pimpleFoam")])
 
 
 def row(res: Path, pid: str) -> str:

@@ -27,6 +27,7 @@ import tempfile
 from pathlib import Path
 
 from _table import emit  # bench/ is on sys.path when this runs as a script
+from jet_atlas import execution_time
 from real_cohort import real_rows, run_workflow, write_rows
 
 REPO = Path(__file__).resolve().parents[1]
@@ -77,16 +78,6 @@ def mesh_only(case: Path) -> dict:
     except Stop as stop:
         status["reason"] = stop.reason
     return status
-
-
-def cpu_s(log: Path) -> float | None:
-    """The last ``ExecutionTime`` of an OpenFOAM log (CPU seconds), None without one."""
-    last = None
-    if log.exists():
-        for line in log.read_text(errors="replace").splitlines():
-            if line.startswith("ExecutionTime = "):
-                last = float(line.split()[2])
-    return last
 
 
 def cells(pid: str, st: dict, snappy_cpu: float | None) -> list[str]:
@@ -142,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             st = mesh_only(case)
             if st.get("reason"):
                 print(f"{pid}: {st['reason']}", file=sys.stderr)
-            return cells(pid, st, cpu_s(case / "logs" / "log.snappyHexMesh"))
+            log = case / "logs" / "log.snappyHexMesh"
+            return cells(pid, st, execution_time([log]) if log.exists() else None)
 
         emit(
             COLUMNS,

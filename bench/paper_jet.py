@@ -23,6 +23,7 @@ import tempfile
 from pathlib import Path
 
 from _table import emit, sig  # bench/ is on sys.path when this runs as a script
+from jet_atlas import execution_time
 from real_cohort import run_workflow, write_rows
 
 PID = "demo_aorta_3"
@@ -34,18 +35,6 @@ WORDS = {
     "tawss_mean": "area-mean TAWSS",
     "U": "U (volume L2)",
 }
-
-
-def execution_time(logs: list[Path]) -> float:
-    """The sum of the last ``ExecutionTime`` (CPU seconds) of each OpenFOAM log."""
-    total = 0.0
-    for log in logs:
-        last = None
-        for line in log.read_text(errors="replace").splitlines():
-            if line.startswith("ExecutionTime = "):
-                last = float(line.split()[2])
-        total += last or 0.0
-    return total
 
 
 def stage_cpu(case: Path) -> dict[str, float]:
