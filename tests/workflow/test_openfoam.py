@@ -546,6 +546,8 @@ def test_render_jet_mesh_and_transient_stages(tmp_path, flavour):
     assert float(ctl["writeInterval"]) == 4.25 and float(ctl["endTime"]) == 2010.5
     sol = ParsedParameterFile(str(case / "system/fvSolution"))
     assert int(sol["PIMPLE"]["nOuterCorrectors"]) == 1 and "SIMPLE" not in sol
+    # without the transient's own setting (a pulsatile run): the solver's non-orthogonal correctors
+    assert int(sol["PIMPLE"]["nNonOrthogonalCorrectors"]) == DEFAULTS["solver"]["n_non_orthogonal_correctors"]
     assert "pFinal" in sol["solvers"] and float(sol["relaxationFactors"]["equations"]['".*"']) == 1
     sch = ParsedParameterFile(str(case / "system/fvSchemes"))
     assert sch["ddtSchemes"]["default"] == "backward"
@@ -771,6 +773,11 @@ def test_jet_transient_window_and_stationarity(jet_transient):
     assert tr["averaging_start_time"] - tr["start_time"] == pytest.approx(tr["washout_s"])
     assert float(tr["end_time_folder"]) == pytest.approx(tr["end_time"]) == pytest.approx(tr["max_end_time"])
     assert tr["time_steps"]["washout"] > 10 and tr["time_steps"]["average"] > 20
+    # pimpleFoam's pressure equation without non-orthogonal correctors (the transient key), SIMPLE's with 1
+    from PyFoam.RunDictionary.ParsedParameterFile import ParsedParameterFile
+
+    pimple = ParsedParameterFile(str(case / "system" / "fvSolution"))["PIMPLE"]
+    assert int(pimple["nNonOrthogonalCorrectors"]) == 0 and DEFAULTS["solver"]["n_non_orthogonal_correctors"] == 1
     # the time step: the snapped inlet and outlet planes leave slivers whose Courant number is
     # several times that of the cells the flow crosses; pimpleFoam's limit is raised by that factor
     cour = tr["courant"]

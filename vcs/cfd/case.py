@@ -244,6 +244,7 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "cell_volumes": False,
         "max_co": cfd["solver"]["transient"]["max_co"],
         "outer_correctors": 1,
+        "pimple_non_orthogonal_correctors": cfd["solver"]["n_non_orthogonal_correctors"],
         "probe_points": None,
         "write_interval": None,
         "max_delta_t": None,

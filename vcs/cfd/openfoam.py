@@ -160,6 +160,7 @@ DEFAULTS: dict[str, Any] = {
             "max_co": 1.0,  # Courant number limit on the cells the flow crosses
             "max_co_end_cells": 4.0,  # at most this on the slivers snapped at the end planes
             "outer_correctors": 1,  # PIMPLE outer correctors when some cells run above Co 1 (1: PISO-like)
+            "non_orthogonal_correctors": 0,  # of pimpleFoam's pressure equation (SIMPLE: solver's own)
         },
         "timeout_s": None,  # wall-clock limit per utility call [s]
     },
@@ -341,6 +342,7 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     n_out = tr.get("outer_correctors")
     if not (isinstance(n_out, int) and not isinstance(n_out, bool) and 1 <= n_out <= 10):
         raise VCSInputError(f"cfd.solver.transient.outer_correctors must be a whole number in [1, 10], not {n_out!r}")
+    _whole(cfd, "solver.transient.non_orthogonal_correctors", 0, 10)
     pl_it = (cfd["solver"].get("plateau") or {}).get("iterations")
     n_it = float(pl_it) if isinstance(pl_it, (int, float)) and not isinstance(pl_it, bool) else math.nan
     if not (n_it.is_integer() and (n_it == 0 or 10 <= n_it <= 100000)):

@@ -162,7 +162,9 @@ def transient_fallback(
     status["criterion_used"] = "none"
     try:
         plan, root = _start_from_simple(case_dir, state, status, tr, ranks, prof)
-        common = _pimple_settings(plan)
+        sol = state["cfd"]["solver"]  # a case rendered before the transient key: the solver's, as then
+        n_non_orth = sol["transient"].get("non_orthogonal_correctors", sol["n_non_orthogonal_correctors"])
+        common = _pimple_settings(plan) | {"pimple_non_orthogonal_correctors": int(n_non_orth)}
         # the controlDict the Courant numbers are computed with (deltaT: the initial time step)
         render_files(
             case_dir, state, STAGE_FILES, end_time=_fmt_time(plan["max_end_time"]), write_interval="1", **common
