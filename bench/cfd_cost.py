@@ -140,22 +140,16 @@ def main(argv: list[str] | None = None) -> int:
         ids = write_rows(wd / "patients.tsv", [r for r in sheet_rows(a.demo) if r["id"] not in skip])
         run_workflow(wd, ["config.yaml"], "patients.tsv", a.cores, "shared real vessels, default config")
         res = wd / "results"
-        print("| " + " | ".join(COLUMNS) + " |")
-        print("|---" * 8 + "|")
-        rows = []
-        for pid in ids:
-            rows.append(cells(res, pid))
-            print("| " + " | ".join(rows[-1]) + " |")
-        if a.json:
-            from _table import command_line, write_table
+        from _table import emit
 
-            write_table(
-                a.json,
-                command=command_line(),
-                measured=f"one run, default config/config.yaml, {a.cores} cores for Snakemake",
-                columns=JSON_COLUMNS,
-                rows=[json_cells(c) for c in rows],
-            )
+        emit(
+            COLUMNS,
+            (cells(res, pid) for pid in ids),
+            a.json,
+            f"one run, default config/config.yaml, {a.cores} cores for Snakemake",
+            json_columns=JSON_COLUMNS,
+            json_row=json_cells,
+        )
         atlas = res / "atlas" / "atlas.json"
         if atlas.exists():
             at = json.loads(atlas.read_text())
