@@ -149,6 +149,8 @@ JSON_COLUMNS = [
     "mean TAWSS Pa (95 %)",
     "U +-%",
 ]
+#: the printed table's columns
+COLUMNS = [*JSON_COLUMNS[:5], "wash-out + window FT", *JSON_COLUMNS[6:], "known"]
 
 
 def cells(name: str, st: dict) -> list[str]:
@@ -239,27 +241,20 @@ def main(argv: list[str] | None = None) -> int:
         f"SIMPLE state: {status['cells']:,} cells, {status['iterations']} iterations, converged "
         f"{status['converged']} ({status.get('reason')})"
     )
-    print(
-        "| variant | maxCo / outer correctors | pimpleFoam CPU s | time steps | dt ms | wash-out + window FT "
-        "| dp Pa (95 %) | mean TAWSS Pa (95 %) | U +-% | known |"
-    )
-    print("|---" * 10 + "|")
-    rows = []
-    for text in a.variant or (JET_TUBE_VARIANTS if a.jet_tube else DEFAULT_VARIANTS):
-        name, keys = parse_variant(text)
-        rows.append(cells(name, run_variant(simple, status, a.workdir.resolve(), name, keys)))
-        print("| " + " | ".join(rows[-1]) + " |", flush=True)
-    print(f"{date.today()}, {platform.node()} ({os.cpu_count()} cores), load {os.getloadavg()[0]:.1f}")
-    if a.json:
-        from _table import command_line, write_table
+    from _table import emit
 
-        write_table(
-            a.json,
-            command=command_line(),
-            measured=f"one run from one SIMPLE state ({status['cells']:,} cells), variants one after the other",
-            columns=JSON_COLUMNS,
-            rows=[(c + ["-"] * len(JSON_COLUMNS))[: len(JSON_COLUMNS)] for c in rows],
-        )
+    emit(
+        COLUMNS,
+        (
+            cells(name, run_variant(simple, status, a.workdir.resolve(), name, keys))
+            for name, keys in map(parse_variant, a.variant or (JET_TUBE_VARIANTS if a.jet_tube else DEFAULT_VARIANTS))
+        ),
+        a.json,
+        f"one run from one SIMPLE state ({status['cells']:,} cells), variants one after the other",
+        json_columns=JSON_COLUMNS,
+        json_row=lambda c: (c + ["-"] * len(JSON_COLUMNS))[: len(JSON_COLUMNS)],
+    )
+    print(f"{date.today()}, {platform.node()} ({os.cpu_count()} cores), load {os.getloadavg()[0]:.1f}")
     return 0
 
 
