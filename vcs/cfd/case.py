@@ -461,125 +461,33 @@ def render_case(
         outlet, a bad per-patient value, or when no point inside the surface is found.
     """
     case_dir = Path(case_dir)
-    cfd = deep_merge(DEFAULTS, cfd)
-    flavour = flavour or cfd.get("flavour") or detect_openfoam()[0] or "esi"
-    if flavour not in FLAVOURS:
-        raise VCSInputError(
-            f"OpenFOAM flavour {flavour!r} is not supported (supported: {', '.join(sorted(FLAVOURS))}); "
-            "install one of those or set cfd.flavour"
-        )
-    cfd["flavour"] = flavour
-    check_cfd(cfd)
-    own = _patient_values(patient)
-    if "outlets" in own:
-        cfd["outlets"] = deep_merge(cfd["outlets"], own["outlets"])
-    fl = FLAVOURS[flavour]
-
-    solids = read_stl_solids(stl_path)
-    roles = {k: patch_role(k) for k in solids}
-    if sum(r == "inlet" for r in roles.values()) != 1:
-        raise VCSInputError(f"the STL needs exactly one inlet solid, found {list(solids)}")
-    if not any(r == "outlet" for r in roles.values()):
-        raise VCSInputError(f"the STL has no outlet solid: {list(solids)}")
-    m = cfd["mesh"]
+    cfd, own = _merged_cfd(cfd, flavour, patient)
+    fl = FLAVOURS[cfd["flavour"]]
+    solids, roles = _case_solids(stl_path)
     # the background grid's frame: the coordinate axes, or the inlet's (n = the inward normal)
-    if m["background_frame"] == "inlet":
+    if cfd["mesh"]["background_frame"] == "inlet":
         origin, axes = inlet_frame(solids)
     else:
         origin, axes = np.zeros(3), np.eye(3)
     local = {k: (t - origin) @ axes.T for k, t in solids.items()}
-    pts = np.concatenate([t.reshape(-1, 3) for t in local.values()])
-    lo, hi = pts.min(0), pts.max(0)
-
-    # cell size from the vessel, bounded background box, levels relative to it
-    if model is not None:
-        if not hasattr(model, "fitted_wall"):
-            from vcs.vessel import VesselModel
-
-            model = VesselModel.load(model)
-        sizes = vessel_sizes(model)  # type: ignore[arg-type]
-    else:
-        sizes = stl_sizes(solids, roles)
-    # a surface geometry's side branches (branch_<k>): their ends are refined (branch_levels below)
-    sizes["branch_diameters_m"] = {
-        k: 2.0 * float(np.sqrt(surface_area(t) / np.pi)) for k, t in solids.items() if k.lower().startswith("branch")
-    }
-    volume = closed_volume(solids)
-    sizing = choose_cell_size(m, sizes, volume, override=own.get("cell_size"))
-    h = sizing["cell_size_m"]
-    bg = background_plan(h, lo, hi, m, sizes["narrowest_diameter_m"])
-    k = bg["level_offset"]
-    hb = bg["background_cell_size_m"]
-
-    def up(lv: list[int]) -> list[int]:
-        return [int(lv[0]) + k, int(lv[1]) + k]
-
-    level = {
-        "wall": up(m["wall_level"]),
-        "inlet": up(m["inlet_level"]),
-        "outlet": up(m["outlet_level"]),
-        "other": up(m["surface_level"]),
-    }
-
-    branch = branch_levels(sizes["branch_diameters_m"], hb, level["outlet"], float(m["cells_across_branch"]))
-    solid_level = {name: branch[name]["level"] if name in branch else level[roles[name]] for name in solids}
-
-    # inflow: the patient's, or the config's (fixed or scaled by the inlet area)
-    inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
-    inflow = choose_inflow(
-        cfd["inlet"], inlet_area, patient={k2: own[k2] for k2 in own if k2 not in ("cell_size", "waveform", "outlets")}
-    )
-    waveform = applied_waveform(cfd["inlet"], inflow, own.get("waveform"), inlet_area)
-    d_in = 2.0 * np.sqrt(inlet_area / np.pi)
-    inflow["inlet_reynolds"] = inflow["mean_inlet_velocity_m_s"] * d_in / float(cfd["physics"]["nu"])
-    cfd["inlet"]["flow_rate"] = inflow["flow_rate_m3_s"]
-    cfd["inlet"]["valve_area"] = inflow["valve_area_m2"]
-    if inflow["jet_velocity_m_s"] is not None:
-        cfd["inlet"]["velocity"] = inflow["jet_velocity_m_s"]
-
+    plan = _mesh_plan(cfd["mesh"], solids, roles, local, model, own.get("cell_size"))
+    inflow, waveform = _applied_inflow(cfd, solids, roles, own)
     outlets = case_outlets(solids, roles, cfd, inflow["flow_rate_m3_s"], waveform)
-    jet = jet_region(solids, cfd, background=hb, min_level=k)
-    finest = max(
-        [k, *level["wall"], *level["inlet"], *level["outlet"], *level["other"]]
-        + [lv[1] for lv in solid_level.values()]
-        + ([jet["level"]] if jet else [])
-    )
-    if m["background_frame"] == "inlet":
-        h_inlet = hb / 2 ** max([level["inlet"][1]] + ([jet["level"]] if jet else []))
-        bg = align_background_to_inlet(bg, h_inlet)
-        bg["why"] += f"; aligned with the inlet (its plane 0.75 of a {h_inlet * 1e3:.4g} mm cell above a grid plane)"
-    bmin = np.asarray(bg["bmin"])
-    if m.get("inside_point"):
-        inside = np.asarray(m["inside_point"], float)
-    else:
-        inside = origin + np.asarray(_inside_point(local, bmin, h, hb / 2**finest)) @ axes
-    corners = [
-        [float(x) for x in origin + np.array([bg[i][0], bg[j][1], bg[k2][2]]) @ axes]
-        for i, j, k2 in (
-            ("bmin", "bmin", "bmin"),
-            ("bmax", "bmin", "bmin"),
-            ("bmax", "bmax", "bmin"),
-            ("bmin", "bmax", "bmin"),
-            ("bmin", "bmin", "bmax"),
-            ("bmax", "bmin", "bmax"),
-            ("bmax", "bmax", "bmax"),
-            ("bmin", "bmax", "bmax"),
-        )
-    ]
-    ranks = max(int(cfd["ranks"]), 1)
-    n = [1, 1, 1]
+    jet = jet_region(solids, cfd, background=plan["hb"], min_level=plan["k"])
+    bg, corners, inside, finest = _placement(cfd["mesh"], plan, jet, local, origin, axes)
     world = np.concatenate([t.reshape(-1, 3) for t in solids.values()])
-    n[int(np.argmax(np.ptp(world, axis=0)))] = ranks
-
+    n = [1, 1, 1]  # the decomposition: every rank along the longest extent
+    n[int(np.argmax(np.ptp(world, axis=0)))] = max(int(cfd["ranks"]), 1)
+    level, solid_level, hb = plan["level"], plan["solid_level"], plan["hb"]
     state = {
-        "flavour": flavour,
+        "flavour": cfd["flavour"],
         "cfd": cfd,
         "stl_source": str(Path(stl_path).resolve()),
         "bmin": bg["bmin"],
         "bmax": bg["bmax"],
         "ncells": bg["ncells"],
         "background_frame": {
-            "type": m["background_frame"],
+            "type": cfd["mesh"]["background_frame"],
             "origin": [float(x) for x in origin],
             "axes": [[float(x) for x in row] for row in axes],
         },
@@ -607,15 +515,19 @@ def render_case(
         "stl_bounds": [[float(x) for x in world.min(0)], [float(x) for x in world.max(0)]],
         "jet_region": jet,
         "mesh_sizing": {
-            "vessel": sizes,
-            "lumen_volume_m3": volume,
-            "cell_size_m": h,
-            "cell_size": sizing,
+            "vessel": plan["sizes"],
+            "lumen_volume_m3": plan["volume"],
+            "cell_size_m": plan["h"],
+            "cell_size": plan["sizing"],
             "background": bg,
-            "levels": {"surface": level["other"], "lumen": k, **{r: level[r] for r in ("wall", "inlet", "outlet")}},
-            "branches": branch,
+            "levels": {
+                "surface": level["other"],
+                "lumen": plan["k"],
+                **{r: level[r] for r in ("wall", "inlet", "outlet")},
+            },
+            "branches": plan["branch"],
             "smallest_cell_m": hb / 2**finest,
-            "min_patch_faces": int(m["min_patch_faces"]),
+            "min_patch_faces": int(cfd["mesh"]["min_patch_faces"]),
         },
         "inflow": inflow,
         "waveform": waveform,
@@ -628,6 +540,153 @@ def render_case(
     state["files"] = list(fl["files"]) + [f"{fl['geometry_dir']}/{STL_NAME}"]
     (case_dir / CASE_JSON).write_text(json.dumps(state, indent=2))
     return state
+
+
+def _merged_cfd(
+    cfd: dict[str, Any] | None, flavour: str | None, patient: dict[str, Any] | None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``cfd`` merged over ``DEFAULTS`` with its flavour set and checked, and the patient's own
+    values (their outlets merged into the config's): :func:`render_case`'s first step."""
+    cfd = deep_merge(DEFAULTS, cfd)
+    flavour = flavour or cfd.get("flavour") or detect_openfoam()[0] or "esi"
+    if flavour not in FLAVOURS:
+        raise VCSInputError(
+            f"OpenFOAM flavour {flavour!r} is not supported (supported: {', '.join(sorted(FLAVOURS))}); "
+            "install one of those or set cfd.flavour"
+        )
+    cfd["flavour"] = flavour
+    check_cfd(cfd)
+    own = _patient_values(patient)
+    if "outlets" in own:
+        cfd["outlets"] = deep_merge(cfd["outlets"], own["outlets"])
+    return cfd, own
+
+
+def _case_solids(stl_path: Path | str) -> tuple[dict[str, NDArray[np.floating]], dict[str, str]]:
+    """The STL's solids and their roles: exactly one inlet, at least one outlet (else VCSInputError)."""
+    solids = read_stl_solids(stl_path)
+    roles = {k: patch_role(k) for k in solids}
+    if sum(r == "inlet" for r in roles.values()) != 1:
+        raise VCSInputError(f"the STL needs exactly one inlet solid, found {list(solids)}")
+    if not any(r == "outlet" for r in roles.values()):
+        raise VCSInputError(f"the STL has no outlet solid: {list(solids)}")
+    return solids, roles
+
+
+def _mesh_plan(
+    m: dict[str, Any],
+    solids: dict[str, NDArray[np.floating]],
+    roles: dict[str, str],
+    local: dict[str, NDArray[np.floating]],
+    model: Any,
+    cell_size: Any,
+) -> dict[str, Any]:
+    """The cell size from the vessel (its model, else the STL's caps; ``cell_size``: the patient's),
+    the bounded background box (in the frame of ``local``) and the refinement levels relative to
+    it, per role and per solid (a surface geometry's side branches ``branch_<k>`` by their
+    diameters)."""
+    pts = np.concatenate([t.reshape(-1, 3) for t in local.values()])
+    if model is not None:
+        if not hasattr(model, "fitted_wall"):
+            from vcs.vessel import VesselModel
+
+            model = VesselModel.load(model)
+        sizes = vessel_sizes(model)
+    else:
+        sizes = stl_sizes(solids, roles)
+    sizes["branch_diameters_m"] = {
+        k: 2.0 * float(np.sqrt(surface_area(t) / np.pi)) for k, t in solids.items() if k.lower().startswith("branch")
+    }
+    volume = closed_volume(solids)
+    sizing = choose_cell_size(m, sizes, volume, override=cell_size)
+    h = sizing["cell_size_m"]
+    bg = background_plan(h, pts.min(0), pts.max(0), m, sizes["narrowest_diameter_m"])
+    k = bg["level_offset"]
+    hb = bg["background_cell_size_m"]
+    level = {
+        role: [int(m[key][0]) + k, int(m[key][1]) + k]
+        for role, key in (
+            ("wall", "wall_level"),
+            ("inlet", "inlet_level"),
+            ("outlet", "outlet_level"),
+            ("other", "surface_level"),
+        )
+    }
+    branch = branch_levels(sizes["branch_diameters_m"], hb, level["outlet"], float(m["cells_across_branch"]))
+    solid_level = {name: branch[name]["level"] if name in branch else level[roles[name]] for name in solids}
+    return {
+        "sizes": sizes,
+        "volume": volume,
+        "sizing": sizing,
+        "h": h,
+        "bg": bg,
+        "k": k,
+        "hb": hb,
+        "level": level,
+        "branch": branch,
+        "solid_level": solid_level,
+    }
+
+
+def _applied_inflow(
+    cfd: dict[str, Any], solids: dict[str, NDArray[np.floating]], roles: dict[str, str], own: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The inflow (the patient's, or the config's fixed or scaled by the inlet area, with the
+    inlet Reynolds number) and the applied waveform; the applied values are written into
+    ``cfd["inlet"]``."""
+    inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
+    inflow = choose_inflow(
+        cfd["inlet"], inlet_area, patient={k: own[k] for k in own if k not in ("cell_size", "waveform", "outlets")}
+    )
+    waveform = applied_waveform(cfd["inlet"], inflow, own.get("waveform"), inlet_area)
+    d_in = 2.0 * np.sqrt(inlet_area / np.pi)
+    inflow["inlet_reynolds"] = inflow["mean_inlet_velocity_m_s"] * d_in / float(cfd["physics"]["nu"])
+    cfd["inlet"]["flow_rate"] = inflow["flow_rate_m3_s"]
+    cfd["inlet"]["valve_area"] = inflow["valve_area_m2"]
+    if inflow["jet_velocity_m_s"] is not None:
+        cfd["inlet"]["velocity"] = inflow["jet_velocity_m_s"]
+    return inflow, waveform
+
+
+def _placement(
+    m: dict[str, Any],
+    plan: dict[str, Any],
+    jet: dict[str, Any] | None,
+    local: dict[str, NDArray[np.floating]],
+    origin: NDArray[np.floating],
+    axes: NDArray[np.floating],
+) -> tuple[dict[str, Any], list[list[float]], NDArray[np.floating], int]:
+    """The background box (aligned with the inlet in the inlet frame), its world corners, the
+    point inside the lumen snappyHexMesh keeps (the config's, or found) and the finest level."""
+    k, hb, level, bg = plan["k"], plan["hb"], plan["level"], plan["bg"]
+    finest = max(
+        [k, *level["wall"], *level["inlet"], *level["outlet"], *level["other"]]
+        + [lv[1] for lv in plan["solid_level"].values()]
+        + ([jet["level"]] if jet else [])
+    )
+    if m["background_frame"] == "inlet":
+        h_inlet = hb / 2 ** max([level["inlet"][1]] + ([jet["level"]] if jet else []))
+        bg = align_background_to_inlet(bg, h_inlet)
+        bg["why"] += f"; aligned with the inlet (its plane 0.75 of a {h_inlet * 1e3:.4g} mm cell above a grid plane)"
+    bmin = np.asarray(bg["bmin"])
+    if m.get("inside_point"):
+        inside = np.asarray(m["inside_point"], float)
+    else:
+        inside = origin + np.asarray(_inside_point(local, bmin, plan["h"], hb / 2**finest)) @ axes
+    corners = [
+        [float(x) for x in origin + np.array([bg[i][0], bg[j][1], bg[k2][2]]) @ axes]
+        for i, j, k2 in (
+            ("bmin", "bmin", "bmin"),
+            ("bmax", "bmin", "bmin"),
+            ("bmax", "bmax", "bmin"),
+            ("bmin", "bmax", "bmin"),
+            ("bmin", "bmin", "bmax"),
+            ("bmax", "bmin", "bmax"),
+            ("bmax", "bmax", "bmax"),
+            ("bmin", "bmax", "bmax"),
+        )
+    ]
+    return bg, corners, inside, finest
 
 
 def case_outlets(
