@@ -14,6 +14,9 @@ from snakemake.utils import min_version
 
 min_version("9.0")
 
+# the repository (this file's folder), also when the workflow is run as workflow/Snakefile (where
+# the Snakemake workflow catalog and snakedeploy look for it): workflow.basedir is then workflow/
+VCS_REPO = str(workflow.current_basedir)
 
 configfile: "config/config.yaml"
 report: "workflow/report/workflow.rst"

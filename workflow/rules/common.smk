@@ -174,7 +174,7 @@ def _number_range(column):
 
     global _PATIENT_SCHEMA
     if _PATIENT_SCHEMA is None:
-        _PATIENT_SCHEMA = yaml.safe_load((Path(workflow.basedir) / "workflow/schemas/patients.schema.yaml").read_text())
+        _PATIENT_SCHEMA = yaml.safe_load((Path(VCS_REPO) / "workflow/schemas/patients.schema.yaml").read_text())
     prop = _PATIENT_SCHEMA["properties"][column]
     auto = any(alt.get("const") == "auto" for alt in prop.get("oneOf", []))
     num = next((alt for alt in prop.get("oneOf", []) if alt.get("type") == "number"), prop)
@@ -278,10 +278,10 @@ def load_patients(sheet):
 
 if config["cfd"].get("inlet", {}).get("waveform"):
     _wf = config["cfd"]["inlet"]["waveform"]
-    if not Path(_wf).is_file() and (Path(workflow.basedir) / _wf).is_file():
+    if not Path(_wf).is_file() and (Path(VCS_REPO) / _wf).is_file():
         # a path of the repository (the shipped vcs/data/waveforms/ascending_aorta.csv of
         # config/pulsatile.yaml) when the run is in another directory (snakemake -d)
-        _wf = config["cfd"]["inlet"]["waveform"] = str(Path(workflow.basedir) / _wf)
+        _wf = config["cfd"]["inlet"]["waveform"] = str(Path(VCS_REPO) / _wf)
     if not Path(_wf).is_file():
         fail(f"cfd.inlet.waveform '{_wf}' not found (paths are relative to {os.getcwd()}); give a CSV of one cycle or null")
     _check_waveform(_wf, "cfd.inlet.waveform")

@@ -18,7 +18,7 @@ import zipfile
 
 KEEP_DIR = Path(".snakemake") / "vcs-kept"
 _KEEP_WILDCARD = re.compile(r"\{(\w+)(?:,[^{}]*)?\}")
-sys.path.insert(0, os.path.join(workflow.basedir, "workflow", "scripts"))
+sys.path.insert(0, os.path.join(VCS_REPO, "workflow", "scripts"))
 import _failure  # noqa: E402  (standard library only)
 
 

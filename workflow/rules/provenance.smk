@@ -18,7 +18,7 @@ _RUN = {"start": datetime.datetime.now(datetime.timezone.utc)}
 
 def _git(*args):
     try:
-        out = subprocess.run(["git", *args], cwd=workflow.basedir, capture_output=True, text=True, timeout=30)
+        out = subprocess.run(["git", *args], cwd=VCS_REPO, capture_output=True, text=True, timeout=30)
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() if out.returncode == 0 else None
