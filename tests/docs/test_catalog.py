@@ -21,7 +21,6 @@ and the workflow at ``workflow/Snakefile``.
 
 from pathlib import Path
 
-import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
