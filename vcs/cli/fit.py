@@ -143,7 +143,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "--units",
         default="auto",
         choices=["auto", "mm", "cm", "m"],
-        help="units of the mesh; auto: largest extent <1 -> m, <25 -> cm, else mm (reported)",
+        help="units of the mesh; auto: from the lumen radius, the extent as a tie-breaker (reported)",
     )
     add_point_argument(
         f,

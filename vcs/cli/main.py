@@ -89,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="vcs",
         description=__doc__.splitlines()[0],
         epilog="exit codes: 0 done, 2 bad input or a refused output (one line says what to fix), "
-        "3 out of memory, 130 interrupted, 1 internal error (a bug; -v shows the traceback)",
+        "3 out of memory, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM), 1 internal error (a bug; -v shows "
+        "the traceback)",
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr; tracebacks of internal errors")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
