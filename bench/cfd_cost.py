@@ -13,7 +13,8 @@ re-read. Per patient: cells, the CFD verdict (criterion; for a time average its 
 flow-through times and the 95 % half-widths of dp / mean TAWSS / U), SIMPLE iterations and
 pimpleFoam time steps, the time step, OpenFOAM CPU s (the solvers' ExecutionTime plus the other
 utilities' wall time), the patient's CPU s and wall s over all its workflow jobs (Snakemake's
-benchmark files: ``cpu_time``, ``s``); then the run's wall time, the machine and its load.
+benchmark files: ``cpu_time``, ``s``; ``cpu_time`` is sampled every 30 s over the job's process
+tree, so it misses the shorter processes and is a lower bound); then the run's wall time, the machine and its load.
 ``--json PATH`` also writes the table in the docs' format (docs/data/bench/cfd_cost.json: SIMPLE
 iterations without the time steps, no time step column).
 """
@@ -72,7 +73,7 @@ COLUMNS = [
     "SIMPLE iterations / time steps",
     "dt ms",
     "OpenFOAM CPU s",
-    "patient CPU s",
+    "jobs CPU s (sampled)",
     "patient wall s",
 ]
 #: the docs JSON's columns
@@ -82,7 +83,7 @@ JSON_COLUMNS = [
     "verdict",
     "SIMPLE iterations",
     "OpenFOAM CPU s",
-    "Python CPU s (workflow jobs)",
+    "jobs CPU s (sampled)",
     "patient wall s",
 ]
 

@@ -12,7 +12,8 @@ DIR (default: a temporary folder) is the Snakemake working directory; the meshed
 cases are DIR/meshing/<id>. Per vessel: the smaller end's and the narrowest diameter, the cell size
 and what set it, the background box's cells (and the levels it was coarsened by, with the box it
 would have had without ``cfd.mesh.max_background_cells``), cells, wall / inlet / outlet faces,
-snappyHexMesh wall and CPU seconds, the inflow. ``--json PATH`` also writes the table in the docs'
+snappyHexMesh's wall seconds and the CPU seconds of the meshing utilities (blockMesh,
+snappyHexMesh, checkMesh: their resource usage), the inflow. ``--json PATH`` also writes the table in the docs'
 format (docs/data/bench/mesh_size_real.json). Needs ../shared/data beside the repository and
 OpenFOAM.
 """
@@ -21,13 +22,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import resource
 import shutil
 import sys
 import tempfile
 from pathlib import Path
 
 from _table import emit  # bench/ is on sys.path when this runs as a script
-from jet_atlas import execution_time
 from real_cohort import real_rows, run_workflow, write_rows
 
 REPO = Path(__file__).resolve().parents[1]
@@ -48,7 +49,7 @@ COLUMNS = [
     "background box cells (k)",
     "cells",
     "wall / inlet / outlet faces",
-    "snappyHexMesh s (CPU)",
+    "snappyHexMesh s (meshing CPU s)",
     "inflow L/min",
 ]
 
@@ -80,9 +81,9 @@ def mesh_only(case: Path) -> dict:
     return status
 
 
-def cells(pid: str, st: dict, snappy_cpu: float | None) -> list[str]:
+def cells(pid: str, st: dict, meshing_cpu: float | None) -> list[str]:
     """One vessel's row of :data:`COLUMNS` from its meshing status (:func:`mesh_only`, with the
-    rendered case's ``state``) and snappyHexMesh's CPU seconds."""
+    rendered case's ``state``) and the meshing utilities' CPU seconds."""
     state = st["state"]
     sizing = state["mesh_sizing"]
     vessel, bg, size = sizing["vessel"], sizing["background"], sizing["cell_size"]
@@ -105,7 +106,7 @@ def cells(pid: str, st: dict, snappy_cpu: float | None) -> list[str]:
         box,
         "-" if st.get("cells") is None else f"{st['cells']:,}",
         faces,
-        "-" if snappy is None else f"{snappy:.1f} (" + ("-" if snappy_cpu is None else f"{snappy_cpu:.1f}") + ")",
+        "-" if snappy is None else f"{snappy:.1f} (" + ("-" if meshing_cpu is None else f"{meshing_cpu:.1f}") + ")",
         f"{state['inflow']['flow_rate_l_min']:.3g}",
     ]
 
@@ -130,11 +131,13 @@ def main(argv: list[str] | None = None) -> int:
             case = wd / "meshing" / pid
             shutil.rmtree(case, ignore_errors=True)
             shutil.copytree(wd / "results" / "patients" / pid / "case_setup", case)
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)  # snappyHexMesh logs no ExecutionTime
             st = mesh_only(case)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if st.get("reason"):
                 print(f"{pid}: {st['reason']}", file=sys.stderr)
-            log = case / "logs" / "log.snappyHexMesh"
-            return cells(pid, st, execution_time([log]) if log.exists() else None)
+            cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+            return cells(pid, st, cpu)
 
         emit(
             COLUMNS,
