@@ -55,8 +55,16 @@ def test_an_interrupted_rerun_puts_every_earlier_output_back(tmp_path, how):
         "-c1",
         *TARGETS,
     ]
+    # SIGINT at its default, as under a terminal, even when this suite runs as a background job
+    # (whose shell set it to ignored: then nothing would notice the Ctrl-C and the run would finish)
     p = subprocess.Popen(
-        cmd, cwd=wd.path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+        cmd,
+        cwd=wd.path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     log = wd.path / "results" / "logs" / "vcs_fit" / f"{IDS[0]}.log"
     deadline = time.monotonic() + 120
