@@ -93,3 +93,27 @@ def test_signal_to_a_workflow_job_stops_its_solver(tmp_path, sig):
     assert _gone(rank), "the solver's rank kept running after its job was interrupted"
     text = log.read_text()
     assert "interrupted" in text and "Traceback" not in text, text
+
+
+def test_ctrl_c_inside_popen_still_stops_the_group(tmp_path, monkeypatch):
+    """A Ctrl-C that lands while ``subprocess.Popen`` is still starting the utility (before the
+    job holds the process) is deferred to the end of that call: the job raises KeyboardInterrupt
+    and the new process group is stopped all the same (without the deferral it kept running)."""
+    real_popen = subprocess.Popen
+
+    def popen_then_ctrl_c(*args, **kwargs):
+        proc = real_popen(*args, **kwargs)
+        _wait_for(tmp_path / "rank.pid")  # the rank is running
+        os.kill(os.getpid(), signal.SIGINT)  # ...and Ctrl-C comes before Popen has returned
+        time.sleep(0.2)
+        return proc
+
+    monkeypatch.setattr(subprocess, "Popen", popen_then_ctrl_c)
+    # Python's own Ctrl-C handler, also when the suite runs as a background job (SIGINT ignored)
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _Runner(tmp_path, {}, timeout=None)(["sh", "-c", RANK], "fake")
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert _gone(int((tmp_path / "rank.pid").read_text())), "the rank outlived a Ctrl-C inside Popen"

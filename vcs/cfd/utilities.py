@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from vcs._signals import signals_deferred
 from vcs.cfd.openfoam import foam_env
 
 # the progress of a case (the workflow's openfoam_solve log): one logger for every stage of
@@ -53,8 +54,12 @@ def _run_group(
     SIGKILL after 5 s) before re-raising, so that no solver keeps running after its job ended.
     ``watch``, when given, is called every ``poll_s`` seconds while the command runs (e.g. to
     read its log and ask the solver to stop)."""
-    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    proc = None
     try:
+        # a Ctrl-C inside Popen itself would leave the new group running with no `proc` to stop it:
+        # deferred to the end of the call, where it raises inside this try
+        with signals_deferred():
+            proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         if watch is None:
             return subprocess.CompletedProcess(cmd, returncode=proc.wait(timeout=timeout))
         end = None if timeout is None else time.monotonic() + timeout
@@ -67,7 +72,8 @@ def _run_group(
                     raise
                 watch()
     except BaseException:
-        stop_group(proc)
+        if proc is not None:
+            stop_group(proc)
         raise
 
 
