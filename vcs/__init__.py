@@ -9,24 +9,73 @@ Public API (all lengths in mm)::
     model.save("model.json"); VesselModel.load("model.json")
 """
 
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _version
+from __future__ import annotations
 
-from vcs.ends import Ends, find_ends
-from vcs.errors import VCSInputError
-from vcs.grid import MeasurementGrid, measurement_grid
-from vcs.io import Surface, read_surface
-from vcs.model import VesselCoordinateSystem
-from vcs.phantoms.factory import make_phantom
-from vcs.phantoms.sweep import Phantom
-from vcs.surface import WallMesh, wall_mesh
-from vcs.vessel import VesselModel, fit_vessel
-from vcs.wall import WallFit, WallModel, fit_wall
+import importlib
+from typing import TYPE_CHECKING, Any
 
-try:  # one source of the version: pyproject.toml (also in results/provenance.json and the docs)
-    __version__ = _version("vcs-atlas")
-except PackageNotFoundError:  # a source tree that was never installed
-    __version__ = "0+unknown"
+#: where each public name lives: imported on first use (PEP 562), so that a job that needs only
+#: part of the package (the CFD jobs, `vcs wall`) does not pay for scipy and VTK it never calls
+_EXPORTS = {
+    "Ends": "vcs.ends",
+    "find_ends": "vcs.ends",
+    "VCSInputError": "vcs.errors",
+    "MeasurementGrid": "vcs.grid",
+    "measurement_grid": "vcs.grid",
+    "Surface": "vcs.io",
+    "read_surface": "vcs.io",
+    "VesselCoordinateSystem": "vcs.model",
+    "make_phantom": "vcs.phantoms.factory",
+    "Phantom": "vcs.phantoms.sweep",
+    "WallMesh": "vcs.surface",
+    "wall_mesh": "vcs.surface",
+    "VesselModel": "vcs.vessel",
+    "fit_vessel": "vcs.vessel",
+    "WallFit": "vcs.wall",
+    "WallModel": "vcs.wall",
+    "fit_wall": "vcs.wall",
+}
+
+if TYPE_CHECKING:  # the same names, for type checkers and editors
+    from vcs.ends import Ends, find_ends
+    from vcs.errors import VCSInputError
+    from vcs.grid import MeasurementGrid, measurement_grid
+    from vcs.io import Surface, read_surface
+    from vcs.model import VesselCoordinateSystem
+    from vcs.phantoms.factory import make_phantom
+    from vcs.phantoms.sweep import Phantom
+    from vcs.surface import WallMesh, wall_mesh
+    from vcs.vessel import VesselModel, fit_vessel
+    from vcs.wall import WallFit, WallModel, fit_wall
+
+    __version__: str
+
+
+def _package_version() -> str:
+    """One source of the version: pyproject.toml (also in results/provenance.json and the docs)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("vcs-atlas")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
+def __getattr__(name: str) -> Any:
+    """A public name (or ``__version__``), imported on first use and kept."""
+    if name == "__version__":
+        value: Any = _package_version()
+    elif name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    else:
+        raise AttributeError(f"module 'vcs' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS, "__version__"})
+
 
 __all__ = [
     "Ends",

@@ -31,10 +31,45 @@ average), :mod:`vcs.cfd.status` (collecting ``status.json``),
 (reading a finished case with pyvista and sampling it on :mod:`vcs.grid`).
 """
 
-from vcs.cfd.case import render_case
-from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, detect_openfoam
-from vcs.cfd.resample import load_fields, read_case, sample_case, sample_pulsatile, write_fields
-from vcs.cfd.run import run_case
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: where each public name lives: imported on first use (PEP 562), so that the case job does not
+#: import the solver's modules, nor the solve job pyvista's reader
+_EXPORTS = {
+    "render_case": "vcs.cfd.case",
+    "DEFAULTS": "vcs.cfd.openfoam",
+    "FLAVOURS": "vcs.cfd.openfoam",
+    "detect_openfoam": "vcs.cfd.openfoam",
+    "load_fields": "vcs.cfd.resample",
+    "read_case": "vcs.cfd.resample",
+    "sample_case": "vcs.cfd.resample",
+    "sample_pulsatile": "vcs.cfd.resample",
+    "write_fields": "vcs.cfd.resample",
+    "run_case": "vcs.cfd.run",
+}
+
+if TYPE_CHECKING:  # the same names, for type checkers and editors
+    from vcs.cfd.case import render_case
+    from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, detect_openfoam
+    from vcs.cfd.resample import load_fields, read_case, sample_case, sample_pulsatile, write_fields
+    from vcs.cfd.run import run_case
+
+
+def __getattr__(name: str) -> Any:
+    """A public name, imported on first use and kept."""
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'vcs.cfd' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})
+
 
 __all__ = [
     "DEFAULTS",

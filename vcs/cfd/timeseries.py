@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
+from scipy import special
 
 BATCH_INTEGRAL_SCALES = 3.0
 """Batch length in integral time scales (batch means of an exponentially correlated signal 3 T_int
@@ -215,7 +215,7 @@ def _one_mean_error(
     se_batch = float(np.std(means, ddof=1) / math.sqrt(nb))
     se_acf = std * math.sqrt(2.0 * ti / window)
     se = max(se_batch, se_acf)
-    q = float(stats.t.ppf(0.5 + 0.5 * confidence, nb - 1))
+    q = float(special.stdtrit(nb - 1, 0.5 + 0.5 * confidence))  # Student's t quantile (scipy.stats.t.ppf's own)
     return {"mean": mean, "std": std, "integral_time_s": ti, "n_batches": nb, "standard_error": se,
             "half_width": q * se}  # fmt: skip
 
