@@ -92,6 +92,8 @@ class SheetData:
     frame: ViewFrame | None = None
     case: tuple[Any, dict[str, Any], float] | None = None
     drawn: dict[str, str] = field(default_factory=dict)
+    #: meshes more than one panel draws (the input surface, the mid-plane slice), made once
+    meshes: dict[str, Any] = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -229,7 +231,15 @@ def _colour_bar(ax: Axes, clim: tuple[float, float], cmap: str, label: str, *, p
 
 
 def _input_surface(d: SheetData) -> Any:
-    """The input mesh in mm with the fit residual (``residual``, NaN where not used) at its points."""
+    """The input mesh in mm with the fit residual (``residual``, NaN where not used) at its points
+    (read once; each panel gets its own copy)."""
+    if "input_surface" not in d.meshes:
+        d.meshes["input_surface"] = _read_input_surface(d)
+    return d.meshes["input_surface"].copy()
+
+
+def _read_input_surface(d: SheetData) -> Any:
+    """:func:`_input_surface`, read."""
     import pyvista as pv
     from scipy.spatial import cKDTree
 
@@ -368,7 +378,15 @@ def _tau_theta_triangulation(tau: np.ndarray, theta: np.ndarray) -> Any:
 
 def _mid_slice(d: SheetData) -> tuple[Any, np.ndarray, np.ndarray]:
     """The CFD mesh cut by the centerline's best-fit plane, in mm, with |U| (cell data ``U_mag``)
-    and its boundary edges' points."""
+    and its boundary edges' points (cut once; each panel gets its own copy of the slice)."""
+    if "mid_slice" not in d.meshes:
+        d.meshes["mid_slice"] = _cut_mid_slice(d)
+    cut, rim, normal = d.meshes["mid_slice"]
+    return cut.copy(), rim, normal
+
+
+def _cut_mid_slice(d: SheetData) -> tuple[Any, np.ndarray, np.ndarray]:
+    """:func:`_mid_slice`, cut."""
     _, frame = _need_model(d)
     internal, _, _ = _case(d)
     cut = internal.slice(normal=frame.normal, origin=frame.centre / 1000.0, generate_triangles=False)
