@@ -151,3 +151,37 @@ def test_a_figure_for_print_has_scale_times_the_pixels(figures, tmp_path):
     assert two.shape[:2] == (2 * one.shape[0], 2 * one.shape[1])
     down = two.reshape(one.shape[0], 2, one.shape[1], 2, 3).mean(axis=(1, 3))
     assert np.mean(np.abs(down - one) > 0.25) < 0.03  # the same picture, sharper
+
+
+def test_a_pipe_in_a_3d_title_is_drawn():
+    """VTK's text renderer takes '|' for a MathText column separator: ``|U| (m/s)`` came out as
+    ``U``. :func:`vtk_text` draws it with the divides sign: a title of pipes alone leaves ink."""
+    import pyvista as pv
+
+    from vcs.atlas.plots import text_font_file, vtk_text
+
+    def ink(text: str) -> int:
+        pl = pv.Plotter(off_screen=True, window_size=[120, 60])
+        try:
+            pl.set_background("white")
+            pl.add_text(
+                text, position=(0.1, 0.3), viewport=True, font_size=14, color="black", font_file=text_font_file()
+            )
+            img = np.asarray(pl.screenshot(return_img=True))
+        finally:
+            pl.close()
+        return int((img[..., :3].max(axis=2) < 128).sum())
+
+    assert ink("|||") == 0  # VTK's own handling: nothing drawn (a VTK that draws it makes this fail: drop vtk_text)
+    assert ink(vtk_text("|||")) > 30
+
+
+@pytest.mark.parametrize(
+    "lo, hi, expected", [(0.01, 1.01, (0.0, 1.06)), (0.2, 1.2, (0.15, 1.25)), (-1.0, 1.0, (-1.1, 1.1))]
+)
+def test_colour_limits_of_a_magnitude_do_not_go_below_zero(lo, hi, expected):
+    """The 5 % margin at either end stops at 0 for a field that is not negative (a |U| scale read
+    "-0.01" at its start); a signed field (p) keeps it."""
+    from vcs.atlas.plots import _padded
+
+    assert _padded(lo, hi) == pytest.approx(expected)

@@ -113,7 +113,8 @@ def build_atlas(
             "percentiles": list(COLOUR_PERCENTILES),
             "shared_by": "every figure of a flow field, 3-D and flat: the widest of the percentile "
             "ranges of its figures' values (the mean's; each mode's mean - 2 sigma, mean, mean + 2 "
-            f"sigma; of a wall field: its values on the wall), widened by {100 * FIELD_LIMIT_PAD:g} % at either end",
+            f"sigma; of a wall field: its values on the wall), widened by {100 * FIELD_LIMIT_PAD:g} % at "
+            "either end (not below 0 when the lower percentile is not)",
             "limits": written["colour_limits"],
         }
         # render times are not written into atlas.json (it holds no timings: a rerun or a SLURM run

@@ -86,6 +86,23 @@ PANEL_PX = (420, 520)  # width, height of one panel of a clipped view
 LABEL_FONT_PX = 14
 TITLE_FONT_PT = 9  # panel titles (pyvista font size)
 NOTE_FONT_PT = 7
+
+
+def text_font_file() -> str:
+    """The TrueType file of the 3-D figures' titles: matplotlib's DejaVu Sans (as the flat
+    figures), which has the divides sign of :func:`vtk_text` (VTK's built-in Arial has not)."""
+    from matplotlib import font_manager
+
+    return str(font_manager.findfont("DejaVu Sans", fallback_to_default=False))
+
+
+def vtk_text(text: str) -> str:
+    """``text`` as VTK draws it faithfully: '|' replaced by U+2223 (the divides sign, drawn alike).
+    VTK's text renderer takes '|' for a column separator (MathText tables): ``|U| (m/s)`` came
+    out as ``U`` and a raised ``(m/s)``."""
+    return text.replace("|", "\u2223")
+
+
 BAR_Y, BAR_HEIGHT = 0.05, 0.08  # colour bar position and height (fractions of the panel)
 
 
@@ -623,17 +640,22 @@ def clipped_view_plotter(
             bar.SetTitle("")
             bar.SetTextPositionToPrecedeScalarBar()
             text = pl.add_text(
-                label,
+                vtk_text(label),
                 position=(0.5, BAR_Y + BAR_HEIGHT + 0.005),
                 viewport=True,
                 font_size=TITLE_FONT_PT,
                 name="colour_bar_title",
+                font_file=text_font_file(),
             )
             text.prop.justification_horizontal = "center"
         # text actors at fixed pixel sizes (corner annotations rescale per viewport)
-        pl.add_text(title, position=(0.03, 0.93), viewport=True, font_size=TITLE_FONT_PT)
+        pl.add_text(
+            vtk_text(title), position=(0.03, 0.93), viewport=True, font_size=TITLE_FONT_PT, font_file=text_font_file()
+        )
         if note and i == 0:
-            pl.add_text(note, position=(0.03, 0.02), viewport=True, font_size=NOTE_FONT_PT)
+            pl.add_text(
+                vtk_text(note), position=(0.03, 0.02), viewport=True, font_size=NOTE_FONT_PT, font_file=text_font_file()
+            )
         pl.camera_position = [
             tuple(centre + view_normal * 3.5 * np.ptp(points.reshape(-1, 3), axis=0).max()),
             tuple(centre),
@@ -863,7 +885,8 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
     """Colour limits shared by every figure of one flow field (3-D and flat, its mean and each
     mode): the widest of the figures' own :func:`robust_limits` (2nd-98th percentile of a mode's
     mean - 2 sigma, mean and mean + 2 sigma values; magnitudes; of a wall field, its values on the
-    wall), widened by :data:`FIELD_LIMIT_PAD` of its width at either end. Each figure then has
+    wall), widened by :data:`FIELD_LIMIT_PAD` of its width at either end (not below 0 when the
+    lower percentile is not). Each figure then has
     less than 2 % of its values beyond either end, and the figures of a field can be compared
     colour for colour. ``panels`` is a field's entry of :func:`flow_grid`'s
     ``panels``."""
@@ -875,22 +898,27 @@ def field_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float
     limits = [robust_limits([mean])]
     limits += [robust_limits([shown(minus), mean, shown(plus)]) for minus, plus, _ in panels["modes"]]
     lo, hi = min(lo for lo, _ in limits), max(hi for _, hi in limits)
-    pad = FIELD_LIMIT_PAD * (hi - lo)  # the extreme cells, often facing a 3-D view, not at the end colours
-    return lo - pad, hi + pad
+    return _padded(lo, hi)  # the extreme cells, often facing a 3-D view, not at the end colours
+
+
+def _padded(lo: float, hi: float) -> tuple[float, float]:
+    """(lo, hi) widened by :data:`FIELD_LIMIT_PAD` of its width at either end, the lower end not
+    below 0 when ``lo`` is not (a magnitude's scale read "-0.01" at its start)."""
+    pad = FIELD_LIMIT_PAD * (hi - lo)
+    return (lo - pad if lo < 0 else max(lo - pad, 0.0)), hi + pad
 
 
 def mean_limits(panels: dict[str, Any], *, on_wall: bool) -> tuple[float, float]:
     """Colour limits of a flow field's mean figure alone: the :data:`MEAN_PERCENTILES` of the mean
     (magnitudes; of a wall field, its values on the wall; of a volume field, its values with its
-    wall layer counted twice) widened by :data:`FIELD_LIMIT_PAD` at
-    either end. The modes' +-2 sigma panels of a varied cohort reach far beyond the mean; on
-    :func:`field_limits` the mean would use a small part of the colour map."""
+    wall layer counted twice) widened by :data:`FIELD_LIMIT_PAD` at either end (not below 0 when
+    the lower percentile is not). The modes' +-2 sigma panels of a varied cohort reach far beyond
+    the mean; on :func:`field_limits` the mean would use a small part of the colour map."""
     mean = _scalar(panels["mean"])
     # a wall field: its wall values; a volume field: its values, its wall values once more (the
     # figures show the wall, where p peaks on an arch's outer curve, as much as the cut)
     lo, hi = robust_limits([mean[:, :, -1]] if on_wall else [mean, mean[:, :, -1]], MEAN_PERCENTILES)
-    pad = FIELD_LIMIT_PAD * (hi - lo)
-    return lo - pad, hi + pad
+    return _padded(lo, hi)
 
 
 def write_flow_files(

@@ -59,6 +59,8 @@ from vcs.atlas.plots import (
     field_title,
     mean_limits,
     robust_limits,
+    text_font_file,
+    vtk_text,
 )
 from vcs.grid import grid_to_vtk
 
@@ -202,9 +204,10 @@ def render_panels(
                 pl.add_mesh(mesh, show_scalar_bar=False, **kw)
             if bar is not None and i == bar.panel:
                 _add_colour_bar(pl, bar)
-            pl.add_text(p.title, position=(0.03, 0.93), viewport=True, font_size=TITLE_FONT_PT, color=TEXT_COLOUR)
+            look = {"color": TEXT_COLOUR, "viewport": True, "font_file": text_font_file()}
+            pl.add_text(vtk_text(p.title), (0.03, 0.93), font_size=TITLE_FONT_PT, **look)  # type: ignore[arg-type]
             if note and i == 0:
-                pl.add_text(note, position=(0.03, 0.01), viewport=True, font_size=NOTE_FONT_PT, color=TEXT_COLOUR)
+                pl.add_text(vtk_text(note), (0.03, 0.01), font_size=NOTE_FONT_PT, **look)  # type: ignore[arg-type]
             frame.set_camera(pl.camera, p.view, aspect=w / h)
         pl.screenshot(str(path), scale=scale)
     finally:
@@ -242,12 +245,13 @@ def _add_colour_bar(pl: pyvista.Plotter, bar: ColourBar) -> None:
     actor.SetTitle("")
     actor.SetTextPositionToSucceedScalarBar()
     text = pl.add_text(
-        bar.label,
+        vtk_text(bar.label),
         position=(0.5, BAR_Y + BAR_HEIGHT + 0.005),
         viewport=True,
         font_size=TITLE_FONT_PT,
         color=TEXT_COLOUR,
         name="colour_bar_title",
+        font_file=text_font_file(),
     )
     text.prop.justification_horizontal = "center"
 
