@@ -151,21 +151,23 @@ def face_geometry(
     """
     centres = np.empty((len(faces), 3))
     areas = np.empty((len(faces), 3))
-    for i, f in enumerate(faces):
-        p = points[f]
-        if len(f) == 3:
-            centres[i] = p.mean(axis=0)
-            areas[i] = 0.5 * np.cross(p[1] - p[0], p[2] - p[0])
+    corners = np.fromiter((len(f) for f in faces), np.int64, len(faces))
+    for k in np.unique(corners):  # the faces of k corners at once (a wall is mostly quads)
+        idx = np.flatnonzero(corners == k)
+        p = points[np.stack([faces[i] for i in idx])]  # (n, k, 3)
+        if k == 3:
+            centres[idx] = p.mean(axis=1)
+            areas[idx] = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
             continue
-        c0 = p.mean(axis=0)
-        p1 = np.roll(p, -1, axis=0)
-        sa = 0.5 * np.cross(p - c0, p1 - c0)
+        c0 = p.mean(axis=1, keepdims=True)
+        p1 = np.roll(p, -1, axis=1)
+        sa = 0.5 * np.cross(p - c0, p1 - c0)  # the fan's triangles' area vectors
         tc = (p + p1 + c0) / 3.0
-        area = sa.sum(axis=0)
-        n = area / max(np.linalg.norm(area), 1e-300)
-        w = np.abs(sa @ n)
-        centres[i] = (tc * w[:, None]).sum(axis=0) / max(w.sum(), 1e-300)
-        areas[i] = area
+        area = sa.sum(axis=1)
+        n = area / np.maximum(np.linalg.norm(area, axis=1), 1e-300)[:, None]
+        w = np.abs(np.einsum("nkj,nj->nk", sa, n))
+        centres[idx] = (tc * w[..., None]).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-300)[:, None]
+        areas[idx] = area
     return centres, areas
 
 
