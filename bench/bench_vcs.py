@@ -85,17 +85,28 @@ def vcs_fit_command(mesh: Path, opts: list[str], out: Path) -> tuple[float, floa
     exe = Path(sys.executable).with_name("vcs")
     cmd = [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "vcs.cli"])]
     cmd += ["fit", str(mesh), "-o", str(out), *opts]
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    err = proc.stderr.read().decode() if proc.stderr else ""
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {err}")
+    # started by a small launcher, not by this process: Linux keeps a child's peak memory from its
+    # parent's at fork across exec, so a child of this bench (~550 MB after the in-process
+    # benchmarks) would report at least that much
+    launched = subprocess.run([sys.executable, "-S", "-c", _LAUNCH, *cmd], capture_output=True, text=True, check=True)
+    r = json.loads(launched.stdout)
+    if r["returncode"] != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({r['returncode']}): {r['stderr']}")
     timings = json.loads((out / "fit_report.json").read_text())["timings_s"]
-    peak_kb = usage.ru_maxrss  # kilobytes on Linux
-    return wall, usage.ru_utime + usage.ru_stime, peak_kb / 1024.0, timings
+    return r["wall"], r["cpu"], r["peak_kb"] / 1024.0, timings  # ru_maxrss: kilobytes on Linux
+
+
+#: runs argv[1:], waits for it (os.wait4) and prints its wall time, CPU time, peak memory and exit
+_LAUNCH = """
+import json, os, subprocess, sys, time
+t0 = time.perf_counter()
+p = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+err = p.stderr.read().decode()
+_, status, u = os.wait4(p.pid, 0)
+wall = time.perf_counter() - t0
+print(json.dumps({"wall": wall, "cpu": u.ru_utime + u.ru_stime, "peak_kb": u.ru_maxrss,
+                  "returncode": os.waitstatus_to_exitcode(status), "stderr": err}))
+"""
 
 
 def fit_command_table(repeat: int = 3) -> None:
