@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -461,10 +462,11 @@ def parse_point(text: str | ArrayLike | None, name: str) -> NDArray[np.floating]
 
 
 class _Background:
-    """``fn(*args)`` on a second thread, started at once; :meth:`result` waits for it (and raises
-    what it raised). A daemon thread: an interrupted fit does not wait for it to end."""
+    """``fn(*args)`` on a second thread, started at once, when this process may use a second core
+    (:func:`spare_core`), else run by the first :meth:`result`; :meth:`result` waits for it (and
+    raises what it raised). A daemon thread: an interrupted fit does not wait for it to end."""
 
-    def __init__(self, fn: Callable[..., Any], *args: Any) -> None:
+    def __init__(self, fn: Callable[..., Any], *args: Any, threaded: bool | None = None) -> None:
         self._out: list[Any] = []
 
         def run() -> None:
@@ -473,15 +475,36 @@ class _Background:
             except BaseException as exc:  # handed to the caller of result()
                 self._out.append((False, exc))
 
-        self._thread = threading.Thread(target=run, name=getattr(fn, "__name__", "background"), daemon=True)
-        self._thread.start()
+        self._run = run
+        self._thread: threading.Thread | None = None
+        if spare_core() if threaded is None else threaded:
+            self._thread = threading.Thread(target=run, name=getattr(fn, "__name__", "background"), daemon=True)
+            self._thread.start()
 
     def result(self) -> Any:
-        self._thread.join()
+        if self._thread is not None:
+            self._thread.join()
+        elif not self._out:
+            self._run()
         ok, value = self._out[0]
         if not ok:
             raise value
         return value
+
+
+def spare_core() -> bool:
+    """May this process use a second core? Not when it is pinned to one (``taskset``, SLURM's
+    ``--cpus-per-task=1``) or told to use one thread (``OMP_NUM_THREADS=1``, as Snakemake sets it
+    for a job of one thread: the cohort's other jobs have the other cores, and a second thread
+    would only add its GIL hand-overs to the job's CPU time)."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        n = os.cpu_count() or 1
+    omp = os.environ.get("OMP_NUM_THREADS", "").strip()
+    if omp.isdigit() and int(omp) > 0:
+        n = min(n, int(omp))
+    return n > 1
 
 
 def fit_vessel(
@@ -534,10 +557,11 @@ def fit_vessel(
         JSON-ready fit report (warnings, counts, end planes, wall residuals in mm, timings in s).
         ``timings_s``: the stages ``read_and_ends``, ``vcs_build`` (itself ``voxelize``, ``astar``,
         ``spline_fit``, ``recentre``, ``choose_L``, ``frame``, ``checks``), ``wall_fit``,
-        ``wall_quality`` and ``self_intersection`` (the wait for the self-intersection test, which
-        runs on a second thread from the start: 0 when it ended first), and ``total``, the whole
-        of this function (wall clock). `vcs fit` adds ``startup`` (interpreter and imports), ``outputs`` (the VTP files)
-        and ``command`` (their sum with ``total``).
+        ``wall_quality`` and ``self_intersection`` (the self-intersection test; with a core to
+        spare, :func:`spare_core`, it runs on a second thread from the start and this is the wait
+        for it: 0 when it ended first), and ``total``, the whole of this function (wall clock).
+        `vcs fit` adds ``startup`` (interpreter and imports), ``outputs`` (the VTP files) and
+        ``command`` (their sum with ``total``).
     wall_fit : WallFit or None
         Per-vertex wall-fit arrays; None without a wall model.
 
@@ -572,9 +596,9 @@ def fit_vessel(
     if isinstance(p_in, np.ndarray) and isinstance(p_out, np.ndarray) and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
     # does the surface cross itself (every fit reports it: 0.3-0.5 s on a 61k-triangle aorta)? It
-    # needs only the surface, so it runs on a second core while the ends, the coordinate system and
-    # the wall are fitted (numpy's array loops and scipy's k-d trees release the GIL): the fit's
-    # wall time drops by about that much, its CPU time does not
+    # needs only the surface, so, with a core to spare, it runs on a second thread while the ends,
+    # the coordinate system and the wall are fitted (numpy's array loops and scipy's k-d trees
+    # release the GIL): the command's wall time drops by about that much, its CPU time does not
     crossing_job = _Background(self_intersections, surf.vertices, surf.faces)
     caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
     for cap in (inlet_cap, outlet_cap):
