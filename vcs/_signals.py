@@ -8,6 +8,7 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 
 @contextmanager
@@ -29,9 +30,9 @@ def signals_deferred() -> Iterator[None]:
     """Defer SIGINT and SIGTERM while the block runs: a signal that comes meanwhile is recorded by a
     temporary handler and re-raised (to the handler that was in place) when the block ends, so that
     the caller's ``except``/``finally`` around the block sees it. Unlike :func:`signals_held`, the
-    signal mask is not touched, so a child process started inside the block (``subprocess.Popen``:
-    it inherits the mask, not the handlers) can still be stopped by SIGINT/SIGTERM. Outside the
-    main thread, a no-op."""
+    signal mask is left alone while the block runs, so a child process started inside it
+    (``subprocess.Popen``: it inherits the mask, not the handlers) can still be stopped by
+    SIGINT/SIGTERM. A signal that is ignored stays ignored. Outside the main thread, a no-op."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -40,11 +41,44 @@ def signals_deferred() -> Iterator[None]:
     def record(signum: int, frame: object) -> None:
         came.append(signum)
 
-    old = {sig: signal.signal(sig, record) for sig in (signal.SIGINT, signal.SIGTERM)}
+    sigs = {signal.SIGINT, signal.SIGTERM}
+    old: dict[int, Any] = {}
+    # the handlers are swapped with both signals blocked, so that neither lands between the two
+    # swaps (it would leave the other handler swapped for good)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    try:
+        wanted: dict[int, Any] = {sig: record for sig in sorted(sigs) if signal.getsignal(sig) is not signal.SIG_IGN}
+        error = _set_handlers(wanted, old)
+        if error is not None:  # a signal from before the block, handled as it came: no block then
+            _set_handlers(old, {})
+            raise error
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     try:
         yield
     finally:
-        for sig, handler in old.items():
-            signal.signal(sig, signal.SIG_DFL if handler is None else handler)  # None: not set from Python
-        if came:
-            signal.raise_signal(came[0])
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+        try:
+            error = _set_handlers(old, {})
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        if error is not None:
+            raise error
+        for sig in dict.fromkeys(came):
+            signal.raise_signal(sig)
+
+
+def _set_handlers(handlers: dict[int, Any], previous: dict[int, Any]) -> BaseException | None:
+    """Install every handler of ``handlers`` (None: SIG_DFL), their predecessors into ``previous``.
+    ``signal.signal`` first runs the Python handlers of signals already pending, which may raise:
+    the swap is then tried again (the pending signal is spent), and the first such exception
+    returned for the caller to raise once every handler is in place."""
+    error: BaseException | None = None
+    for sig, handler in handlers.items():
+        while True:
+            try:
+                previous[sig] = signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+                break
+            except BaseException as exc:  # noqa: BLE001 - a pending signal's handler raised
+                error = error or exc
+    return error

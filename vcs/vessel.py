@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -479,7 +480,15 @@ class _Background:
         self._thread: threading.Thread | None = None
         if spare_core() if threaded is None else threaded:
             self._thread = threading.Thread(target=run, name=getattr(fn, "__name__", "background"), daemon=True)
-            self._thread.start()
+            # started with SIGINT/SIGTERM blocked, which it keeps: the kernel then hands a Ctrl-C to
+            # the main thread only, so that signals_held() there still holds it back (a signal the
+            # thread took would raise in the main thread at once, inside VTK: a crash)
+            sigs = {signal.SIGINT, signal.SIGTERM}
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+            try:
+                self._thread.start()
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
     def result(self) -> Any:
         if self._thread is not None:
@@ -558,8 +567,9 @@ def fit_vessel(
         ``timings_s``: the stages ``read_and_ends``, ``vcs_build`` (itself ``voxelize``, ``astar``,
         ``spline_fit``, ``recentre``, ``choose_L``, ``frame``, ``checks``), ``wall_fit``,
         ``wall_quality`` and ``self_intersection`` (the self-intersection test; with a core to
-        spare, :func:`spare_core`, it runs on a second thread from the start and this is the wait
-        for it: 0 when it ended first), and ``total``, the whole of this function (wall clock).
+        spare, :func:`spare_core`, it runs on a second thread from the end of ``read_and_ends``
+        and this is the wait for it: 0 when it ended first), and ``total``, the whole of this
+        function (wall clock).
         `vcs fit` adds ``startup`` (interpreter and imports), ``outputs`` (the VTP files) and
         ``command`` (their sum with ``total``).
     wall_fit : WallFit or None
@@ -595,11 +605,6 @@ def fit_vessel(
     )
     if isinstance(p_in, np.ndarray) and isinstance(p_out, np.ndarray) and np.linalg.norm((p_in - p_out) * s) < 1.0:
         raise VCSInputError("--inlet and --outlet are less than 1 mm apart; give the two ends of the section")
-    # does the surface cross itself (every fit reports it: 0.3-0.5 s on a 61k-triangle aorta)? It
-    # needs only the surface, so, with a core to spare, it runs on a second thread while the ends,
-    # the coordinate system and the wall are fitted (numpy's array loops and scipy's k-d trees
-    # release the GIL): the command's wall time drops by about that much, its CPU time does not
-    crossing_job = _Background(self_intersections, surf.vertices, surf.faces)
     caps: list[tuple[NDArray[np.floating], NDArray[np.integer]] | None] = []
     for cap in (inlet_cap, outlet_cap):
         if cap is None:
@@ -620,6 +625,12 @@ def fit_vessel(
         units=surf.units,
     )
     t_read = time.perf_counter()
+    # does the surface cross itself (every fit reports it: 0.3-0.5 s on a 61k-triangle aorta)? It
+    # needs only the surface, so, with a core to spare, it runs on a second thread while the
+    # coordinate system and the wall are fitted (numpy's array loops and scipy's k-d trees release
+    # the GIL): the command's wall time drops by about that much, its CPU time does not. Started
+    # once the ends are found, the usual place for bad input to stop the fit
+    crossing_job = _Background(self_intersections, surf.vertices, surf.faces)
     try:
         vcs = VesselCoordinateSystem.from_surface(
             surf.vertices, surf.faces, ends, n_knots=L, recentre_iterations=recentre_iterations

@@ -37,3 +37,12 @@ def test_an_irregular_quad_has_its_area_centroid_not_its_corner_mean():
     centres, areas = face_geometry(points, [np.arange(4)])
     assert areas[0] == pytest.approx([0, 0, 3.0])
     assert centres[0] == pytest.approx([2.0, 4 / 9, 0.0])
+
+
+def test_no_faces_and_faces_as_lists():
+    points = np.array([(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)], float)
+    centres, areas = face_geometry(points, [])
+    assert centres.shape == (0, 3) and areas.shape == (0, 3)
+    centres, areas = face_geometry(points, [[0, 1, 3, 2], [0, 1, 2]])
+    assert centres[0] == pytest.approx([0.5, 0.5, 0]) and areas[0] == pytest.approx([0, 0, 1.0])
+    assert areas[1] == pytest.approx([0, 0, 0.5])

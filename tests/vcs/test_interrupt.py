@@ -117,3 +117,31 @@ def test_ctrl_c_inside_popen_still_stops_the_group(tmp_path, monkeypatch):
     finally:
         signal.signal(signal.SIGINT, old)
     assert _gone(int((tmp_path / "rank.pid").read_text())), "the rank outlived a Ctrl-C inside Popen"
+
+
+def test_deferred_signals_are_all_delivered_and_the_handlers_restored():
+    """Inside signals_deferred a SIGINT that is ignored stays ignored and a SIGTERM that comes after
+    it is not lost: it reaches the job's own handler when the block ends; both handlers are the
+    job's again afterwards."""
+    from vcs._signals import signals_deferred
+
+    got = []
+
+    def on_term(signum, frame):
+        got.append(signum)
+
+    old_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    old_term = signal.signal(signal.SIGTERM, on_term)
+    try:
+        with signals_deferred():
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.05)
+            assert got == []  # deferred
+        time.sleep(0.05)
+        assert got == [signal.SIGTERM]
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        assert signal.getsignal(signal.SIGTERM) is on_term
+    finally:
+        signal.signal(signal.SIGINT, old_int)
+        signal.signal(signal.SIGTERM, old_term)
