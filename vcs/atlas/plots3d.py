@@ -204,10 +204,16 @@ def render_panels(
                 pl.add_mesh(mesh, show_scalar_bar=False, **kw)
             if bar is not None and i == bar.panel:
                 _add_colour_bar(pl, bar)
-            look = {"color": TEXT_COLOUR, "viewport": True, "font_file": text_font_file()}
-            pl.add_text(vtk_text(p.title), (0.03, 0.93), font_size=TITLE_FONT_PT, **look)  # type: ignore[arg-type]
+            font = text_font_file()
+            pl.add_text(
+                vtk_text(p.title), position=(0.03, 0.93), font_size=TITLE_FONT_PT, color=TEXT_COLOUR,
+                viewport=True, font_file=font,
+            )  # fmt: skip
             if note and i == 0:
-                pl.add_text(vtk_text(note), (0.03, 0.01), font_size=NOTE_FONT_PT, **look)  # type: ignore[arg-type]
+                pl.add_text(
+                    vtk_text(note), position=(0.03, 0.01), font_size=NOTE_FONT_PT, color=TEXT_COLOUR,
+                    viewport=True, font_file=font,
+                )  # fmt: skip
             frame.set_camera(pl.camera, p.view, aspect=w / h)
         pl.screenshot(str(path), scale=scale)
     finally:
