@@ -41,27 +41,21 @@ def signals_deferred() -> Iterator[None]:
     def record(signum: int, frame: object) -> None:
         came.append(signum)
 
-    sigs = {signal.SIGINT, signal.SIGTERM}
+    sigs = (signal.SIGINT, signal.SIGTERM)
     old: dict[int, Any] = {}
-    # the handlers are swapped with both signals blocked, so that neither lands between the two
+    # the handlers are swapped with both signals held, so that neither lands between the two
     # swaps (it would leave the other handler swapped for good)
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    try:
+    with signals_held():
         wanted: dict[int, Any] = {sig: record for sig in sorted(sigs) if signal.getsignal(sig) is not signal.SIG_IGN}
         error = _set_handlers(wanted, old)
         if error is not None:  # a signal from before the block, handled as it came: no block then
             _set_handlers(old, {})
             raise error
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     try:
         yield
     finally:
-        mask = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-        try:
+        with signals_held():
             error = _set_handlers(old, {})
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         if error is not None:
             raise error
         for sig in dict.fromkeys(came):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import signal
 import threading
 import time
 from collections.abc import Callable
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vcs._signals import signals_held
 from vcs.ends import EndSelector, find_ends, parse_end_option
 from vcs.errors import VCSInputError
 from vcs.io import UNIT_TO_MM, Surface, read_surface
@@ -483,12 +483,8 @@ class _Background:
             # started with SIGINT/SIGTERM blocked, which it keeps: the kernel then hands a Ctrl-C to
             # the main thread only, so that signals_held() there still holds it back (a signal the
             # thread took would raise in the main thread at once, inside VTK: a crash)
-            sigs = {signal.SIGINT, signal.SIGTERM}
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-            try:
+            with signals_held():
                 self._thread.start()
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
     def result(self) -> Any:
         if self._thread is not None:
