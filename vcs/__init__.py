@@ -11,8 +11,9 @@ Public API (all lengths in mm)::
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from vcs._lazy import lazy_exports
 
 #: where each public name lives: imported on first use (PEP 562), so that a job that needs only
 #: part of the package (the CFD jobs, `vcs wall`) does not pay for scipy and VTK it never calls
@@ -61,21 +62,7 @@ def _package_version() -> str:
         return "0+unknown"
 
 
-def __getattr__(name: str) -> Any:
-    """A public name (or ``__version__``), imported on first use and kept."""
-    if name == "__version__":
-        value: Any = _package_version()
-    elif name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    else:
-        raise AttributeError(f"module 'vcs' has no attribute {name!r}")
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS, "__version__"})
-
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, {"__version__": _package_version})
 
 __all__ = [
     "Ends",

@@ -33,8 +33,9 @@ average), :mod:`vcs.cfd.status` (collecting ``status.json``),
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from vcs._lazy import lazy_exports
 
 #: where each public name lives: imported on first use (PEP 562), so that the case job does not
 #: import the solver's modules, nor the solve job pyvista's reader
@@ -58,18 +59,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from vcs.cfd.run import run_case
 
 
-def __getattr__(name: str) -> Any:
-    """A public name, imported on first use and kept."""
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'vcs.cfd' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
-
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
     "DEFAULTS",
