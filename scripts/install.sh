@@ -42,4 +42,10 @@ if [ ! -f "$stamp" ]; then
   fi
   touch "$stamp"
 fi
+# OpenFOAM's headers and wmake (Debian's source package, in /opt/vcs-openfoam-dev) and the
+# project's boundary conditions compiled against the installed OpenFOAM: the Windkessel outlet
+# (templates/openfoam/lib/vcsWindkessel -> /opt/vcs-openfoam-dev/lib/libvcsWindkessel.so; rebuilt
+# only when its sources change)
+bash scripts/openfoam_dev.sh setup
+bash scripts/openfoam_dev.sh build templates/openfoam/lib/vcsWindkessel >/dev/null
 echo "[install] OK: $(.venv/bin/python --version), OpenFOAM $(dpkg-query -W -f='${Version}' openfoam 2>/dev/null || echo '?')"
