@@ -572,3 +572,32 @@ def test_lint_reports_nothing(cohort):
     text = r.stdout + r.stderr
     assert "Lints for" not in text, text
     assert "Congratulations, your workflow is in a good condition!" in text, text
+
+
+AORTACFD = Path(__file__).resolve().parents[3] / "shared" / "data" / "vessels" / "aortacfd_patient1"
+
+
+def test_bad_outlet_bc_table_fails_with_one_line(cohort):
+    (cohort.path / "p2_rcr.csv").write_text("end,R_p,C,R_d,units\nend:1,1,0,1,SI\n")
+    cohort.write_sheet(
+        [{"id": "P1", "mesh": "meshes/p1.stl"}, {"id": "P2", "mesh": "meshes/p3.stl", "outlet_bc": "p2_rcr.csv"}]
+    )
+    msg = _one_line_error(cohort)
+    assert "line 4 (id P2): outlet_bc" in msg and "p2_rcr.csv: line 2" in msg and "C 0" in msg, msg
+
+
+@pytest.mark.skipif(not (AORTACFD / "wall_aorta.stl").is_file(), reason="shared data aortacfd_patient1 absent")
+def test_outlet_bc_row_on_the_inlet_fails_at_planning_naming_patient_row_and_ends(cohort):
+    """The table's rows are matched to the surface's ends when the workflow plans."""
+    caps = {n: str(AORTACFD / f"{n}.stl") for n in ("inlet", "outlet1", "outlet4")}
+    (cohort.path / "rcr.csv").write_text(f"end,R_p,C,R_d,units\n{caps['outlet1']},1,1,1,SI\n{caps['inlet']},1,1,1,SI\n")
+    row = {"id": "A1", "mesh": str(AORTACFD / "wall_aorta.stl"), "units": "mm", "inlet_cap": caps["inlet"]}
+    row.update(outlet_cap=caps["outlet4"], outlet_bc="rcr.csv")
+    cohort.write_sheet([row])
+    msg = _one_line_error(cohort)
+    assert "(id A1): outlet_bc" in msg and "rcr.csv: line 3" in msg and "is the inlet (end:0)" in msg, msg
+    assert "end:4 at" in msg, msg
+    (cohort.path / "rcr.csv").write_text(
+        "end,R_p,C,R_d,units\n" + "".join(f"{AORTACFD / f'outlet{k}.stl'},1,1,1,SI\n" for k in (1, 2, 3, 4))
+    )
+    assert ("openfoam_case", "A1") in cohort.planned_jobs()

@@ -127,7 +127,8 @@ def test_rendered_outlet_conditions_both_flavours(split_tube, tmp_path):
         assert q == pytest.approx(f[1] * Q0, rel=1e-9)
         assert "zeroGradient" in _block(p, "branch_1") and "fixedValue" in _block(p, "outlet")
         assert "inletOutlet" in _block(u, "outlet")
-        st = render_case(tmp_path / f"r_{flavour}", split_tube, tube_cfd({"type": "rcr", "rcr": RCR}), flavour=flavour)
+        kind = {"type": "rcr_fixed_share", "rcr": RCR}
+        st = render_case(tmp_path / f"r_{flavour}", split_tube, tube_cfd(kind), flavour=flavour)
         p = (tmp_path / f"r_{flavour}" / "0/p").read_text()
         want = "exprFixedValue" if flavour == "esi" else "codedFixedValue"
         assert want in _block(p, "outlet") and "zeroGradient" in _block(p, "branch_1")  # its Windkessel's share
@@ -135,6 +136,18 @@ def test_rendered_outlet_conditions_both_flavours(split_tube, tmp_path):
         assert "flowRateOutletVelocity" in _block(u, "branch_1") and "inletOutlet" in _block(u, "outlet")
         total = sum(1 / (o["r_p"] + o["r_d"]) for o in st["outlets"])
         assert 1 / total == pytest.approx(RCR["resistance"])
+        # rcr: the implicit Windkessel on every outlet, the compiled library loaded by the solver
+        st = render_case(tmp_path / f"w_{flavour}", split_tube, tube_cfd({"type": "rcr", "rcr": RCR}), flavour=flavour)
+        p = (tmp_path / f"w_{flavour}" / "0/p").read_text()
+        u = (tmp_path / f"w_{flavour}" / "0/U").read_text()
+        ctl = (tmp_path / f"w_{flavour}" / "system/controlDict").read_text()
+        for o in st["outlets"]:
+            block = _block(p, o["name"])
+            assert "type            vcsWindkesselPressure;" in block and "inletOutlet" in _block(u, o["name"])
+            r_sum = float(re.search(r"Rp +(\S+);", block).group(1)) + float(re.search(r"Rd +(\S+);", block).group(1))
+            assert r_sum * RHO == pytest.approx(o["r_p"] + o["r_d"], rel=1e-9)  # kinematic: SI / rho
+            assert re.search(r"\bC +0;", block)  # steady inflow: the resistances only
+        assert re.search(r'libs +\("/\S+/libvcsWindkessel\.so"\);', ctl)
 
 
 def test_patient_outlets_override_and_bad_values(tube, tmp_path):
@@ -171,7 +184,7 @@ def test_resistance_outlet_steady(tube, tmp_path):
     assert q == pytest.approx(Q0, rel=1e-4)
     assert o["mean_pressure_pa"] == pytest.approx(RCR["resistance"] * q, rel=0.01)
     assert abs(o["mean_pressure_pa"] / (RCR["resistance"] * q) - 1) < 1e-3  # measured: < 1e-6
-    assert abs(st["outlet_mass_balance"]["relative"]) < 1e-4 and state["outlets"][0]["bc_p"] == "rcr"
+    assert abs(st["outlet_mass_balance"]["relative"]) < 1e-4 and state["outlets"][0]["bc_p"] == "windkessel"
 
 
 @pytest.mark.openfoam
@@ -239,21 +252,119 @@ def test_murray_split_steady_and_pulsatile(split_tube, tmp_path):
 
 @pytest.mark.openfoam
 @needs_foam
-def test_rcr_branch_takes_its_windkessel_share(split_tube, tmp_path):
-    """rcr with a branch next to the main outlet (regression: a pressure condition on both, fed by
-    their own flows, diverged in SIMPLE and circulated -128 % / +228 % of the inflow in pimpleFoam):
-    the branch takes its Windkessel's share f_k Q_in, the main outlet's pressure is its own
-    Windkessel's, and the branch's pressure is within 1 % of what its Windkessel would give."""
+def test_rcr_fixed_share_branch_takes_its_windkessel_share(split_tube, tmp_path):
+    """rcr_fixed_share (the earlier rcr) with a branch next to the main outlet: the branch takes its
+    Windkessel's share f_k Q_in, the main outlet's pressure is its own Windkessel's (explicit), and
+    the branch's pressure is within 1 % of what its Windkessel would give."""
     case = tmp_path / "rcr_split"
-    render_case(case, split_tube, tube_cfd({"type": "rcr", "rcr": RCR}), flavour="esi")
+    render_case(case, split_tube, tube_cfd({"type": "rcr_fixed_share", "rcr": RCR}), flavour="esi")
     st = run_case(case, ranks=1)
     assert st["converged"], st["reason"]
     out = {o["name"]: o for o in st["outlets"]}
     for o in out.values():
         assert o["fraction"] == pytest.approx(o["target_fraction"], rel=0.01)
     main, branch = out["outlet"], out["branch_1"]
-    assert main["condition"] == "pressure" and branch["condition"] == "flow share"
+    assert main["condition"] == "Windkessel pressure, explicit" and branch["condition"] == "flow share"
     assert main["mean_pressure_pa"] == pytest.approx((main["r_p"] + main["r_d"]) * main["flow_rate_m3_s"], rel=1e-3)
     own = (branch["r_p"] + branch["r_d"]) * branch["flow_rate_m3_s"]
     assert branch["mean_pressure_pa"] == pytest.approx(own, rel=0.01)  # measured -0.9 %
     assert abs(st["outlet_mass_balance"]["relative"]) < 1e-4
+
+
+# ------------------------------------------------------------------ a Windkessel on every outlet (issue 37)
+
+
+def write_half_split_tube_stl(path: Path, n_theta: int = 48, n_z: int = 16) -> Path:
+    """A straight tube along z whose end (z = LENGTH) is two half discs: ``outlet`` (x > 0) and
+    ``branch_1`` (x < 0), fans from the end's centre sharing its diameter: two outlets of one lumen
+    with almost no 3-D resistance between them, their centres 2 x 4R/(3 pi) apart."""
+    tube = write_closed_tube_stl(path, radius=R, length=LENGTH, n_theta=n_theta, n_z=n_z, axis=(0.0, 0.0, 1.0))
+    from vcs.mesh import read_stl_solids
+
+    solids = read_stl_solids(tube)
+    th = np.linspace(-np.pi / 2, 3 * np.pi / 2, n_theta, endpoint=False)  # ring[0] and ring[n/2] on the y axis
+    ring = np.column_stack([R * np.cos(th), R * np.sin(th), np.full(n_theta, LENGTH)])
+    centre = np.array([0.0, 0.0, LENGTH])
+    fan = np.stack([np.broadcast_to(centre, ring.shape), ring, np.roll(ring, -1, axis=0)], 1)  # normal +z
+    half = n_theta // 2
+    write_stl_ascii(
+        path, {"wall": solids["wall"], "inlet": solids["inlet"], "outlet": fan[:half], "branch_1": fan[half:]}
+    )
+    return path
+
+
+# unequal RCRs (SI): the x > 0 half 1/3 of the resistance of the x < 0 half; tau 0.15 s and 0.10 s
+RCR_A = {"R_p": 5.0e7, "C": 0.15 / 4.5e8, "R_d": 4.5e8}
+RCR_B = {"R_p": 1.5e8, "C": 0.10 / 1.35e9, "R_d": 1.35e9}
+
+
+def write_rcr_table(path: Path) -> Path:
+    """The per-outlet table of the half-split tube, ends given as points (m) near each half's centre."""
+    lines = ["end,R_p,C,R_d,P_d,units"]
+    for x, r in ((0.4 * R, RCR_A), (-0.4 * R, RCR_B)):
+        lines.append(f'"{x:.6g},0,{LENGTH:.6g}",{r["R_p"]:.6g},{r["C"]:.6g},{r["R_d"]:.6g},0,SI')
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def half_tube(tmp_path_factory) -> Path:
+    return write_half_split_tube_stl(tmp_path_factory.mktemp("half") / "half.stl")
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_rcr_every_outlet_split_emerges_steady(half_tube, tmp_path):
+    """rcr on both halves of a split end (regression: two Windkessel pressures fed by their own
+    flows, coupled explicitly, diverged in SIMPLE and circulated -128 % / +228 % of the inflow in
+    pimpleFoam): with the implicit coupling the steady split is that of the resistances in parallel
+    (3/4 : 1/4, a lumen of negligible resistance between them), each outlet's pressure its own
+    (R_p + R_d) Q, from the patient's own per-outlet table."""
+    table = write_rcr_table(tmp_path / "outlets.csv")
+    case = tmp_path / "rcr_every"
+    state = render_case(case, half_tube, tube_cfd({"type": "free"}), flavour="esi", patient={"outlet_bc": str(table)})
+    assert {o["bc_p"] for o in state["outlets"]} == {"windkessel"} and state["cfd"]["outlets"]["type"] == "rcr"
+    st = run_case(case, ranks=1)
+    assert st["converged"], st["reason"]
+    out = {o["name"]: o for o in st["outlets"]}
+    assert out["outlet"]["r_d"] == pytest.approx(RCR_A["R_d"]) and out["branch_1"]["r_d"] == pytest.approx(RCR_B["R_d"])
+    assert out["outlet"]["target_fraction"] == pytest.approx(0.75, rel=1e-12)
+    for o in out.values():
+        assert o["fraction"] == pytest.approx(o["target_fraction"], rel=0.005)
+        assert o["mean_pressure_pa"] == pytest.approx((o["r_p"] + o["r_d"]) * o["flow_rate_m3_s"], rel=1e-3)
+        assert o["condition"] == "Windkessel pressure, implicit" and o["source"] == "table"
+    assert abs(st["outlet_mass_balance"]["relative"]) < 1e-4
+
+
+@pytest.mark.openfoam
+@needs_foam
+def test_rcr_every_outlet_pulsatile_against_the_0d_network(half_tube, tmp_path):
+    """Unequal RCRs on the two halves under a reversing pulsatile inflow: each outlet's pressure and
+    flow over the last cycle within 2 % (of its cycle's largest magnitude) of the exact periodic
+    solution of the 0-D network, the RCRs in parallel fed by the waveform, harmonic by harmonic
+    (:func:`vcs.cfd.outlets.parallel_rcr_periodic`)."""
+    from vcs.cfd.outlets import parallel_rcr_periodic
+    from vcs.cfd.waveform import load_waveform
+
+    wf_path = write_waveform(tmp_path / "w.csv", Q0, 1.5 * Q0)  # reverses: Q from -1e-6 to 5e-6 m3/s
+    table = write_rcr_table(tmp_path / "outlets.csv")
+    extra = pulsatile_extra(wf_path)
+    # 3 cycles from the mean-flow state (the transients decay as exp(-t / 0.15 s)); the RCR's
+    # backward-Euler step at T/400 = 1 ms errs by ~dt / (2 tau) = 0.3-0.5 % of the swing
+    extra["pulsatile"] |= {"cycles": 3, "discard_cycles": 2, "max_cycles": 3, "min_steps_per_cycle": 400}
+    case = tmp_path / "rcr_pulsatile"
+    render_case(case, half_tube, tube_cfd({"type": "free"}, **extra), flavour="esi", patient={"outlet_bc": str(table)})
+    st = run_case(case, ranks=1)
+    assert st["pulsatile"]["evaluated"], st["reason"]
+    wf = load_waveform(wf_path)
+    rcrs = [{"r_p": r["R_p"], "c": r["C"], "r_d": r["R_d"], "p_distal_pa": 0.0} for r in (RCR_A, RCR_B)]
+    t0 = 2 * PERIOD
+    for k, name in enumerate(("outlet", "branch_1")):
+        q, p = function_series(case, f"flowRate_{name}"), function_series(case, f"pressure_{name}")
+        last = q[:, 0] > t0 + 1e-9
+        t = q[last, 0]
+        p_sim = np.interp(t, p[:, 0], p[:, 1]) * RHO
+        p_ref, q_ref = parallel_rcr_periodic(t, PERIOD, wf.fourier(400), rcrs)
+        err_p = np.abs(p_sim - p_ref).max() / np.abs(p_ref).max()
+        err_q = np.abs(q[last, 1] - q_ref[k]).max() / np.abs(q_ref[k]).max()
+        assert err_p < 0.02 and err_q < 0.02, (name, err_p, err_q)

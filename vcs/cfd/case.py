@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vcs.cfd.foamfiles import patch_geometry
-from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, check_cfd, deep_merge, detect_openfoam, template_dir
+from vcs.cfd.openfoam import DEFAULTS, FLAVOURS, check_cfd, deep_merge, detect_openfoam, foam_library, template_dir
 from vcs.cfd.sizing import (
     background_plan,
     cell_size_value,
@@ -33,8 +33,10 @@ if TYPE_CHECKING:
 
     from vcs.vessel import VesselModel
 
-#: per-patient values render_case accepts (SI units), e.g. from the patients sheet
-PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area", "waveform", "outlets")
+#: per-patient values render_case accepts (SI units), e.g. from the patients sheet; ``outlet_bc``
+#: (the per-outlet RCR table, :mod:`vcs.cfd.bc_tables`) and ``mesh`` (the patient's surface, which
+#: resolves the table's ``end:N`` rows) are paths
+PATIENT_KEYS = ("cell_size", "flow_rate", "velocity", "valve_area", "waveform", "outlets", "outlet_bc", "mesh")
 
 STL_NAME = "vessel.stl"
 CASE_JSON = "vcsflow_case.json"
@@ -253,6 +255,7 @@ def _context(state: dict[str, Any], **extra: Any) -> dict[str, Any]:
         "waveform": state.get("waveform") is not None,  # pulsatile: the mapped inlet (vcs.cfd.pulsatile)
         "pulsatile": cfd.get("pulsatile") or {},
         "continue_average": False,
+        "foam_libs": state.get("foam_libs") or [],
     }
     ctx.update(extra)
     return ctx
@@ -345,6 +348,12 @@ def _patient_values(patient: dict[str, Any] | None) -> dict[str, Any]:
         if k == "waveform":  # the patient's own inflow waveform (a CSV path), checked when loaded
             if not isinstance(v, (str, Path)):
                 raise VCSInputError(f"the patient's inflow waveform must be the path of a CSV file, not {v!r}")
+            out[k] = str(v)
+            continue
+        if k in ("outlet_bc", "mesh"):  # paths, checked when read (vcs.cfd.bc_tables.outlet_rcrs)
+            what = "per-outlet RCR table (CSV or rcrt.dat)" if k == "outlet_bc" else "surface file"
+            if not isinstance(v, (str, Path)) or not str(v).strip():
+                raise VCSInputError(f"the patient's {k} must be the path of a {what}, not {v!r}")
             out[k] = str(v)
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
@@ -441,7 +450,9 @@ def render_case(
     patient : dict or None
         The patient's own values, taking precedence over ``cfd`` and applied as given (never
         scaled): ``cell_size`` (m or ``"auto"``), ``flow_rate`` (m^3/s), or ``velocity`` (m/s)
-        with ``valve_area`` (m^2); None values are ignored.
+        with ``valve_area`` (m^2), ``waveform`` (a CSV or .flow path), ``outlets`` (type, rcr
+        totals), ``outlet_bc`` (path of the per-outlet RCR table, :func:`vcs.cfd.bc_tables.outlet_rcrs`)
+        with ``mesh`` (the patient's surface, for its ``end:N`` rows); None values are ignored.
 
     Returns
     -------
@@ -472,7 +483,8 @@ def render_case(
     local = {k: (t - origin) @ axes.T for k, t in solids.items()}
     plan = _mesh_plan(cfd["mesh"], solids, roles, local, model, own.get("cell_size"))
     inflow, waveform = _applied_inflow(cfd, solids, roles, own)
-    outlets = case_outlets(solids, roles, cfd, inflow["flow_rate_m3_s"], waveform)
+    table = patient_outlet_table(own, solids, model, cfd)
+    outlets = case_outlets(solids, roles, cfd, inflow["flow_rate_m3_s"], waveform, table=table)
     jet = jet_region(solids, cfd, background=plan["hb"], min_level=plan["k"])
     bg, corners, inside, finest = _placement(cfd["mesh"], plan, jet, local, origin, axes)
     world = np.concatenate([t.reshape(-1, 3) for t in solids.values()])
@@ -531,6 +543,10 @@ def render_case(
         },
         "inflow": inflow,
         "waveform": waveform,
+        # compiled boundary conditions the solvers load (controlDict libs): the Windkessel outlets
+        "foam_libs": [foam_library("vcsWindkessel")]
+        if any(o["bc_p"] == "windkessel" for o in outlets.values())
+        else [],
     }
     case_dir.mkdir(parents=True, exist_ok=True)
     geo = case_dir / fl["geometry_dir"]
@@ -636,7 +652,7 @@ def _applied_inflow(
     ``cfd["inlet"]``."""
     inlet_area = sum(surface_area(t) for name, t in solids.items() if roles[name] == "inlet")
     inflow = choose_inflow(
-        cfd["inlet"], inlet_area, patient={k: own[k] for k in own if k not in ("cell_size", "waveform", "outlets")}
+        cfd["inlet"], inlet_area, patient={k: own[k] for k in ("flow_rate", "velocity", "valve_area") if k in own}
     )
     waveform = applied_waveform(cfd["inlet"], inflow, own.get("waveform"), inlet_area)
     d_in = 2.0 * np.sqrt(inlet_area / np.pi)
@@ -689,12 +705,43 @@ def _placement(
     return bg, corners, inside, finest
 
 
+def patient_outlet_table(
+    own: dict[str, Any], solids: dict[str, NDArray[np.floating]], model: Any, cfd: dict[str, Any]
+) -> dict[str, dict[str, float]] | None:
+    """The patient's per-outlet RCRs by patch name (:func:`vcs.cfd.bc_tables.outlet_rcrs` of the
+    sheet's ``outlet_bc``, in the mesh's units from its model), or None; a table makes the outlets
+    ``rcr`` (``cfd["outlets"]["type"]`` is set so), any other outlet type given with it is refused."""
+    if not own.get("outlet_bc"):
+        return None
+    from vcs.cfd.bc_tables import outlet_rcrs
+
+    kind = cfd["outlets"].get("type", "free")
+    own_kind = (own.get("outlets") or {}).get("type")
+    if own_kind not in (None, "rcr"):
+        raise VCSInputError(
+            f"the patient's outlet_bc table gives a Windkessel per outlet, but its outlets are {own_kind}: "
+            "set its outlets to rcr (or leave them empty)"
+        )
+    if kind != "rcr":
+        cfd["outlets"]["type"] = "rcr"
+    units = "m"
+    if model is not None:
+        if not hasattr(model, "units"):
+            from vcs.vessel import VesselModel
+
+            model = VesselModel.load(model)
+        units = str(getattr(model, "units", "m"))
+    return outlet_rcrs(own["outlet_bc"], solids, units=units, mesh=own.get("mesh"))
+
+
 def case_outlets(
     solids: dict[str, NDArray[np.floating]],
     roles: dict[str, str],
     cfd: dict[str, Any],
     flow_rate: float,
     waveform: dict[str, Any] | None,
+    *,
+    table: dict[str, dict[str, float]] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The outlet plan of a case (:func:`vcs.cfd.outlets.outlet_plan` on the STL's outlet solids
     and their areas), by patch name; a pulsatile case's murray branches also get ``flow_table``:
@@ -709,6 +756,7 @@ def case_outlets(
         cfd["outlets"],
         flow_rate=flow_rate,
         rho=float(cfd["physics"]["rho"]),
+        table=table,
     )
     for o in plan:
         if waveform is not None and o["bc_u"] == "flowRateOutletVelocity":

@@ -33,7 +33,7 @@ from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line 
 GEOMETRIES = ("model", "surface")
 """``cfd.geometry``: the Eq. 8 model wall, or the patient's own surface (:mod:`vcs.lumen`)."""
 
-OUTLET_TYPES = ("free", "murray", "rcr")
+OUTLET_TYPES = ("free", "murray", "rcr", "rcr_fixed_share")
 """``cfd.outlets.type``."""
 
 DEFAULTS: dict[str, Any] = {
@@ -78,14 +78,17 @@ DEFAULTS: dict[str, Any] = {
     # patient's own surface with every end a patch: inlet, outlet and branch_<k>; vcs.lumen)
     "geometry": "model",
     "outlets": {
-        # free: p = 0 on every outlet; murray: every branch_<k> takes fraction r_k^3 / sum r^3 of
-        # the inflow, the main outlet (p = 0) the rest; rcr: a three-element Windkessel per outlet
+        # free: p = 0 on every outlet; murray: every branch_<k> takes fraction r_k^n / sum r^n of
+        # the inflow, the main outlet (p = 0) the rest; rcr: a three-element Windkessel on every
+        # outlet, coupled implicitly (the split comes out of the solution); rcr_fixed_share: the
+        # branches take their Windkessel's fixed share, the main outlet alone a Windkessel pressure
         "type": "free",
         "rcr": {
             "resistance": 1.33e8,  # total peripheral resistance [Pa s/m3] (~100 mmHg / 6 L/min), split by Murray's law
             "compliance": 1.0e-8,  # total compliance [m3/Pa] (~1.3 mL/mmHg), split by Murray's law
             "proximal_fraction": 0.09,  # R_p / (R_p + R_d) of every outlet
             "distal_pressure": 0.0,  # P_d [Pa] (the pressures are relative: p = 0 is P_d)
+            "split_exponent": 3.0,  # n of the split r^n / sum r^n (3: Murray's law, 2: by area)
         },
     },
     "physics": {
@@ -302,6 +305,7 @@ def check_cfd(cfd: dict[str, Any]) -> None:
     _number(cfd, "outlets.rcr.compliance", 0.0, 1e-3, lo_open=True)
     _number(cfd, "outlets.rcr.proximal_fraction", 0.0, 1.0, hi_open=True)
     _number(cfd, "outlets.rcr.distal_pressure", -1e6, 1e6)
+    _number(cfd, "outlets.rcr.split_exponent", 0.0, 10.0, lo_open=True)
     _word(cfd, "inlet.type", INLET_TYPES)
     _word(cfd, "inlet.scaling", INFLOW_SCALINGS)
     _number(cfd, "inlet.reference_inlet_area", 0.0, 1.0, lo_open=True)
@@ -626,6 +630,25 @@ def openfoam_installation() -> dict[str, Any]:
     if forced:
         info["flavour"], info["forced"] = forced, True
     return info
+
+
+OPENFOAM_DEV_DIR = "/opt/vcs-openfoam-dev"
+"""Where ``scripts/openfoam_dev.sh`` prepares OpenFOAM's headers and wmake and puts the project's
+compiled libraries (``lib/``); ``$VCS_OPENFOAM_DEV`` overrides it (as it does for the script)."""
+
+
+def foam_library(name: str) -> str:
+    """The absolute path of one of the project's OpenFOAM libraries (``lib<name>.so``, compiled by
+    ``bash scripts/install.sh`` from ``templates/openfoam/lib/<name>``), or a one-line VCSInputError
+    saying how to build it."""
+    root = Path(os.environ.get("VCS_OPENFOAM_DEV") or OPENFOAM_DEV_DIR)
+    lib = root / "lib" / f"lib{name}.so"
+    if not lib.is_file():
+        raise VCSInputError(
+            f"the OpenFOAM library {lib} is not built (needed by the rcr outlets): run bash scripts/install.sh, "
+            f"which compiles templates/openfoam/lib/{name} against the installed OpenFOAM"
+        )
+    return str(lib)
 
 
 def detect_openfoam() -> tuple[str | None, str | None]:

@@ -101,8 +101,8 @@ def _rcr(r_p: float, c: float, r_d: float) -> tuple[float, float, float]:
     )
 
 
-def murray_fractions(areas: ArrayLike) -> NDArray[np.floating]:
-    """Flow fraction of each outlet by Murray's law.
+def murray_fractions(areas: ArrayLike, exponent: float = 3.0) -> NDArray[np.floating]:
+    """Flow fraction of each outlet by Murray's law (``exponent`` n: r^n instead of r^3).
 
     Murray (1926, PNAS 12:207-214) found that the flow a vessel carries at least cost (viscous
     dissipation plus the metabolic upkeep of its blood volume) grows as the cube of its radius, so
@@ -110,12 +110,16 @@ def murray_fractions(areas: ArrayLike) -> NDArray[np.floating]:
 
         fraction_k = r_k^3 / sum_j r_j^3 = A_k^{3/2} / sum_j A_j^{3/2},      r_k = sqrt(A_k / pi)
 
-    (r_k: the radius of the circle with the end's area A_k).
+    (r_k: the radius of the circle with the end's area A_k). Another exponent n splits as
+    ``fraction_k = r_k^n / sum_j r_j^n`` (n = 2: in proportion to the area), for a cohort whose
+    branches are known to take less than Murray's share.
 
     Parameters
     ----------
     areas : (n,) float
         Area of each outlet, m^2 (any consistent unit: only ratios matter); n >= 1, all positive.
+    exponent : float
+        n > 0 (default 3, Murray's law).
 
     Returns
     -------
@@ -129,8 +133,9 @@ def murray_fractions(areas: ArrayLike) -> NDArray[np.floating]:
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise VCSInputError(f"outlet area {k} is {a[k]!r}; every outlet area must be a positive number (m^2)")
-    r3 = np.sqrt(a / math.pi) ** 3
-    return np.asarray(r3 / r3.sum())
+    n = _positive("the Murray exponent", exponent, "r^n")
+    rn = np.sqrt(a / math.pi) ** n
+    return np.asarray(rn / rn.sum())
 
 
 def split_rcr(
@@ -139,10 +144,12 @@ def split_rcr(
     areas: ArrayLike,
     *,
     proximal_fraction: float = DEFAULT_PROXIMAL_FRACTION,
+    exponent: float = 3.0,
 ) -> list[dict[str, float]]:
     """An RCR Windkessel per outlet from the total resistance and compliance, split by Murray's law.
 
-    With f_k = :func:`murray_fractions` (areas), the outlets are resistances in parallel, each taking
+    With f_k = :func:`murray_fractions` (areas, exponent: r^n, n = 3 by default, 2 = by area), the
+    outlets are resistances in parallel, each taking
     its Murray share of the flow at a common pressure, and the compliance is shared in proportion::
 
         R_k = R_total / f_k,      C_k = C_total f_k,
@@ -159,8 +166,8 @@ def split_rcr(
     13:625-640) and Xiao et al. 2014 (Int J Numer Method Biomed Eng 30:204-231). The default
     beta = 0.09 is a modelling convention (R_p about a tenth of the outlet's resistance), not a value
     measured in or taken from a table of these papers: give the patient's own
-    ``cfd.outlets.rcr.proximal_fraction`` when it is known (per-outlet parameters are not accepted:
-    every outlet's RCR comes from this split).
+    ``cfd.outlets.rcr.proximal_fraction`` when it is known, or the measured values of every outlet
+    (the patients sheet's ``outlet_bc`` table, :mod:`vcs.cfd.bc_tables`) instead of this split.
 
     Parameters
     ----------
@@ -172,6 +179,8 @@ def split_rcr(
         Outlet areas, m^2.
     proximal_fraction : float, keyword-only
         beta = R_p / (R_p + R_d), in [0, 1) (0: a two-element Windkessel).
+    exponent : float, keyword-only
+        n of the split r^n / sum r^n (3: Murray's law; 2: by area).
 
     Returns
     -------
@@ -184,7 +193,7 @@ def split_rcr(
     beta = _finite("the proximal fraction", proximal_fraction, "R_p / (R_p + R_d)")
     if not 0.0 <= beta < 1.0:
         raise VCSInputError(f"the proximal fraction {proximal_fraction!r} must be in [0, 1) (R_p / (R_p + R_d))")
-    fractions = murray_fractions(areas)
+    fractions = murray_fractions(areas, exponent)
     outlets = []
     for f in fractions:
         r_k = r_total / float(f)
@@ -437,22 +446,165 @@ def rcr_periodic_pressure(
     return np.asarray(pd + np.real(phase @ zq))
 
 
+def parallel_rcr_periodic(
+    t: ArrayLike,
+    period: float,
+    coeffs: ArrayLike,
+    rcrs: list[dict[str, float]],
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """The exact periodic state of RCR outlets in parallel fed by one flow (a lumen with no
+    resistance of its own): the common pressure and every outlet's flow.
+
+    Each harmonic n of the inflow, ``Q_in(t) = Re sum_n Q_n exp(i n omega t)`` (the coefficients of
+    :meth:`vcs.cfd.waveform.Waveform.fourier`), divides among the outlets by their impedances
+    ``Z_k(omega) = R_p,k + R_d,k / (1 + i omega R_d,k C_k)`` (:func:`rcr_impedance`), all at one
+    pressure (the outlets' distal pressures P_d equal)::
+
+        P_n = Q_n / sum_k 1/Z_k(n omega),      Q_k,n = P_n / Z_k(n omega)
+
+        P(t) = P_d + Re sum_n P_n exp(i n omega t),   Q_k(t) = Re sum_n Q_k,n exp(i n omega t)
+
+    Parameters
+    ----------
+    t : (m,) float
+        Times, s.
+    period : float
+        T > 0, s.
+    coeffs : (N + 1,) complex
+        Inflow harmonics Q_0 .. Q_N, m^3/s.
+    rcrs : list of dict
+        Per outlet ``r_p``, ``c``, ``r_d`` (SI) and ``p_distal_pa`` (the same for every outlet).
+
+    Returns
+    -------
+    pressure : (m,) float
+        P(t), Pa.
+    flows : (n_outlets, m) float
+        Q_k(t), m^3/s (their sum is the inflow).
+    """
+    T = _positive("the period", period, "s")
+    qn = np.atleast_1d(np.asarray(coeffs, dtype=complex))
+    pds = {float(k.get("p_distal_pa", 0.0)) for k in rcrs}
+    if len(pds) != 1:
+        raise VCSInputError("the outlets in parallel must share one distal pressure P_d for this solution")
+    omega = 2.0 * math.pi / T
+    w = np.arange(qn.size) * omega
+    z = np.array([rcr_impedance(w, k["r_p"], k["c"], k["r_d"]) for k in rcrs])  # (n_outlets, N + 1)
+    pn = qn / (1.0 / z).sum(axis=0)
+    phase = np.exp(1j * np.multiply.outer(np.asarray(t, dtype=float), w))  # (m, N + 1)
+    return pds.pop() + np.real(phase @ pn), np.real((pn / z) @ phase.T)
+
+
 # --------------------------------------------------------------------------- the outlet plan of a case
 
-OUTLET_TYPES = ("free", "murray", "rcr")
+OUTLET_TYPES = ("free", "murray", "rcr", "rcr_fixed_share")
 """``cfd.outlets.type`` (also :data:`vcs.cfd.openfoam.OUTLET_TYPES`)."""
 
 STEADY_RELAXATION = 0.3
-"""Under-relaxation of a resistance outlet's pressure in a steady (SIMPLE) run and its transient
-fallback: ``p <- p + a (R Q - p)`` at every evaluation. The explicit coupling ``p = R Q`` (Q of the
-last iteration) amplifies a change of the flow split between outlets by about R over the lumen's
-own resistance, which can exceed 1 for SIMPLE's pressure correction; relaxed, a single outlet
-converges as (1 - a)^n to p = R Q."""
+"""Under-relaxation of an explicit resistance outlet (``rcr_fixed_share``'s main outlet) in a steady
+(SIMPLE) run and its transient fallback: ``p <- p + a (R Q - p)`` at every evaluation. The explicit
+coupling ``p = R Q`` (Q of the last iteration) amplifies a change of the flow split between outlets
+by about R over the lumen's own resistance, which can exceed 1 for SIMPLE's pressure correction;
+relaxed, a single outlet converges as (1 - a)^n to p = R Q."""
+
+WINDKESSEL_BC = "vcsWindkesselPressure"
+"""The OpenFOAM boundary condition of an ``rcr`` outlet (``templates/openfoam/lib/vcsWindkessel``,
+compiled at install): the RCR coupled implicitly with the pressure equation."""
 
 
 def outlet_role(name: str) -> str:
     """``"main"`` for an ``outlet*`` end (the section's tau = 1 end), ``"branch"`` for ``branch*``."""
     return "branch" if name.lower().startswith("branch") else "main"
+
+
+def common_pressure_split(
+    r_total: ArrayLike, p_distal: ArrayLike, flow_rate: float
+) -> tuple[float, NDArray[np.floating]]:
+    """The pressure and the flows of resistances in parallel fed by one flow (steady 0-D network).
+
+    Outlets k of resistance R_k = R_p,k + R_d,k to their distal pressures P_d,k, joined at one node
+    (a lumen whose own resistance is negligible) and fed by Q::
+
+        sum_k (P - P_d,k) / R_k = Q   ->   P = (Q + sum_k P_d,k / R_k) / sum_k 1/R_k,
+        Q_k = (P - P_d,k) / R_k
+
+    Parameters
+    ----------
+    r_total : (n,) float
+        R_p + R_d of each outlet, Pa s/m^3 (> 0).
+    p_distal : (n,) float
+        P_d of each outlet, Pa.
+    flow_rate : float
+        Q, m^3/s.
+
+    Returns
+    -------
+    pressure : float
+        P, Pa.
+    flows : (n,) float
+        Q_k, m^3/s (summing to Q).
+    """
+    r = np.asarray(r_total, dtype=float)
+    pd = np.asarray(p_distal, dtype=float)
+    g = 1.0 / r
+    p = (float(flow_rate) + float((pd * g).sum())) / float(g.sum())
+    return p, (p - pd) * g
+
+
+def rcr_values(
+    names: list[str],
+    areas: ArrayLike,
+    outlets: dict[str, Any],
+    table: dict[str, dict[str, float]] | None = None,
+) -> list[dict[str, Any]]:
+    """Every outlet's RCR (SI): the user's per-outlet values when ``table`` is given, else the totals
+    of ``cfd.outlets.rcr`` split by r^n (:func:`split_rcr`, n = ``split_exponent``, 3: Murray).
+
+    Parameters
+    ----------
+    names : list of str
+        The outlet patches.
+    areas : (n,) float
+        Their areas, m^2.
+    outlets : dict
+        ``cfd.outlets`` (``rcr``: ``resistance``, ``compliance``, ``proximal_fraction``,
+        ``distal_pressure``, ``split_exponent``).
+    table : dict, optional
+        Patch name -> ``r_p``, ``c``, ``r_d``, ``p_d`` (SI), one entry for every name
+        (:func:`vcs.cfd.bc_tables.outlet_rcrs`).
+
+    Returns
+    -------
+    list of dict
+        Per outlet: ``r_p``, ``c``, ``r_d`` (Pa s/m^3, m^3/Pa), ``p_distal_pa``, ``source``
+        (``table`` or ``split r^n``).
+    """
+    r = outlets.get("rcr") or {}
+    if table is not None:
+        missing = [n for n in names if n not in table]
+        if missing:
+            raise VCSInputError(
+                f"the outlet table has no row for {', '.join(missing)}: give every outlet its R_p, C, R_d"
+            )
+        out = []
+        for n in names:
+            r_p, c, r_d = _rcr(table[n]["r_p"], table[n]["c"], table[n]["r_d"])
+            p_d = _finite("the distal pressure P_d", table[n].get("p_d", 0.0), "Pa")
+            out.append({"r_p": r_p, "c": c, "r_d": r_d, "p_distal_pa": p_d, "source": "table"})
+        return out
+    n_exp = float(r.get("split_exponent", 3.0))
+    split = split_rcr(
+        r["resistance"],
+        r["compliance"],
+        areas,
+        proximal_fraction=r.get("proximal_fraction", DEFAULT_PROXIMAL_FRACTION),
+        exponent=n_exp,
+    )
+    p_d = _finite("the distal pressure", r.get("distal_pressure", 0.0), "Pa")
+    return [
+        {"r_p": k["r_p"], "c": k["c"], "r_d": k["r_d"], "p_distal_pa": p_d, "source": f"split r^{n_exp:g}"}
+        for k in split
+    ]
 
 
 def outlet_plan(
@@ -462,28 +614,31 @@ def outlet_plan(
     *,
     flow_rate: float,
     rho: float,
+    table: dict[str, dict[str, float]] | None = None,
 ) -> list[dict[str, Any]]:
     """The boundary condition of every outlet of a case, from ``cfd.outlets`` (plain JSON dicts).
 
     * ``free``: every outlet at p = 0 (U ``inletOutlet``).
     * ``murray``: every branch prescribes its Murray share (Murray 1926) of the inflow,
-      ``Q_k = f_k Q_in`` with ``f_k = r_k^3 / sum_j r_j^3`` over **all** outlets (the main ones
-      included; :func:`murray_fractions`), through ``flowRateOutletVelocity`` (p zero gradient);
-      the main outlet(s) at p = 0 take the rest (their own Murray share when the split holds).
-    * ``rcr``: every outlet a three-element Windkessel (Westerhof et al. 2009) from
-      :func:`split_rcr` (the totals split by Murray's law):
-      ``P = R_p Q + P_c,  C dP_c/dt = Q - (P_c - P_d)/R_d``; a steady run sees ``R_p + R_d``.
-      The main outlet(s) carry the Windkessel as a pressure condition. A branch next to a main
-      outlet takes its Windkessel's share of the flow instead, ``Q_k = f_k Q_in(t)`` (as murray):
-      the outlets' Windkessels are in parallel with one time constant and ``Z_k = Z_total / f_k``
-      (:func:`split_rcr`), so at a common pressure this split is exact at every instant, and the
-      pressures of a rigid incompressible lumen differ between its ends by far less than the
-      Windkessel's ``Z Q`` (R_total ~ 1e8 Pa s/m^3 against ~1e6 for an aorta). A pressure
-      condition on every outlet, each fed by its own flow (explicit coupling), amplifies any
-      change of the split by ~ R_k / (the lumen's resistance between the outlets): on a tube whose
-      end is split into a disc and an annulus, SIMPLE diverged and pimpleFoam settled to a
-      circulation of -128 % / +228 % of the inflow through the two outlets. With branches only
-      (no ``outlet*``) every outlet keeps the pressure condition (that coupling).
+      ``Q_k = f_k Q_in`` with ``f_k = r_k^n / sum_j r_j^n`` over **all** outlets (the main ones
+      included; :func:`murray_fractions`, n = ``rcr.split_exponent``, 3 by default), through
+      ``flowRateOutletVelocity`` (p zero gradient); the main outlet(s) at p = 0 take the rest.
+    * ``rcr``: a three-element Windkessel (Westerhof et al. 2009) on **every** outlet, the user's
+      per-outlet values (``table``) or the totals split by r^n (:func:`rcr_values`)::
+
+          P = R_p Q + P_c,      C dP_c/dt = Q - (P_c - P_d)/R_d
+
+      coupled implicitly with the 3-D flow (:data:`WINDKESSEL_BC`: a Robin condition built from the
+      pressure equation's own coefficients, so the RCR holds within every pressure solve); the flow
+      split between the outlets is part of the solution. A steady run sees ``R_p + R_d``. U is
+      ``inletOutlet`` (backflow enters with no momentum: the stabilisation of the outlets).
+      ``target_fraction`` is the split of resistances in parallel at one pressure
+      (:func:`common_pressure_split`), what a lumen with no resistance of its own would give; the
+      capacitors start at that state (``p_c0``), the mean-flow state of the cycle.
+    * ``rcr_fixed_share``: the branches take a fixed share of the inflow (their Windkessel's share,
+      ``Q_k = f_k Q_in(t)``, as murray) and only the main outlet(s) carry a Windkessel pressure,
+      coupled explicitly (an OpenFOAM expression): the split cannot respond to the lumen (kept for
+      comparison with earlier runs; with branches only, every outlet keeps that explicit pressure).
 
     Parameters
     ----------
@@ -493,36 +648,46 @@ def outlet_plan(
         Their areas, m^2.
     outlets : dict
         ``cfd.outlets`` (``type``, ``rcr``: ``resistance``, ``compliance``, ``proximal_fraction``,
-        ``distal_pressure``), checked.
+        ``distal_pressure``, ``split_exponent``), checked.
     flow_rate : float
         The (mean) inflow, m^3/s.
     rho : float
         Density, kg/m^3: OpenFOAM's kinematic values are the SI ones over rho (pressures,
         resistances) or times rho (compliance).
+    table : dict, optional
+        ``rcr``: the patient's per-outlet values (patch name -> ``r_p``, ``c``, ``r_d``, ``p_d``, SI).
 
     Returns
     -------
     list of dict
         Per outlet, in the order of ``names``: ``name``, ``role`` (main | branch), ``type``,
-        ``area_m2``, ``target_fraction`` (murray and rcr: f_k; free: None), ``bc_u``
-        (``inletOutlet`` | ``flowRateOutletVelocity``), ``bc_p`` (``fixedValue`` |
-        ``zeroGradient`` | ``rcr``); murray branches ``flow_rate_m3_s`` (the mean target);
-        rcr ``r_p``, ``c``, ``r_d`` (SI), ``p_distal_pa``, ``kinematic`` (``r_p``, ``r_d``,
-        ``tau`` = R_d C (s), ``p_distal``, ``p_c0`` = P_d + R_d f_k Q_in: the capacitor's
+        ``area_m2``, ``target_fraction`` (murray, rcr: the planned mean split; free: None), ``bc_u``
+        (``inletOutlet`` | ``flowRateOutletVelocity``), ``bc_p`` (``fixedValue`` | ``zeroGradient``
+        | ``windkessel`` | ``rcr``); murray branches ``flow_rate_m3_s`` (the mean target); rcr and
+        rcr_fixed_share ``r_p``, ``c``, ``r_d`` (SI), ``p_distal_pa``, ``source``, ``kinematic``
+        (``r_p``, ``r_d``, ``c`` (C rho), ``tau`` = R_d C (s), ``p_distal``, ``p_c0``: the capacitor's
         mean-flow state, its initial value).
     """
     a = np.asarray(areas, dtype=float)
     kind = str(outlets.get("type", "free"))
     if kind not in OUTLET_TYPES:
         raise VCSInputError(f"outlet type {kind!r} is not one of {', '.join(OUTLET_TYPES)}")
+    if table is not None and kind != "rcr":
+        raise VCSInputError(f"a per-outlet RCR table needs outlets type rcr, not {kind!r}")
     roles = [outlet_role(n) for n in names]
     if kind == "murray" and "main" not in roles:
         raise VCSInputError(
             "murray outlets need a main outlet (an 'outlet' solid at p = 0 taking the rest of the flow); "
             f"found only {', '.join(names)}"
         )
-    fractions = murray_fractions(a) if kind != "free" else np.full(len(names), np.nan)
-    rcr = split_rcr_of(outlets, a) if kind == "rcr" else None
+    n_exp = float((outlets.get("rcr") or {}).get("split_exponent", 3.0))
+    fractions = murray_fractions(a, n_exp) if kind != "free" else np.full(len(names), np.nan)
+    rcr = rcr_values(names, a, outlets, table) if kind in ("rcr", "rcr_fixed_share") else None
+    q_k = None
+    if rcr is not None:
+        _, q_k = common_pressure_split([k["r_p"] + k["r_d"] for k in rcr], [k["p_distal_pa"] for k in rcr], flow_rate)
+        if kind == "rcr":
+            fractions = q_k / flow_rate
     plan: list[dict[str, Any]] = []
     for i, (name, role) in enumerate(zip(names, roles)):
         o: dict[str, Any] = {
@@ -536,9 +701,11 @@ def outlet_plan(
         }
         if kind == "murray" and role == "branch":
             o.update(bc_u="flowRateOutletVelocity", bc_p="zeroGradient", flow_rate_m3_s=float(fractions[i]) * flow_rate)
-        elif rcr is not None:
-            o.update(_rcr_entry(rcr[i], outlets, flow_rate, rho))
-            if role == "branch" and "main" in roles:  # its Windkessel's share of the flow (see above)
+        elif rcr is not None and q_k is not None:
+            o.update(_rcr_entry(rcr[i], float(q_k[i]), rho))
+            if kind == "rcr":
+                o["bc_p"] = "windkessel"
+            elif role == "branch" and "main" in roles:  # rcr_fixed_share: its Windkessel's share of the flow
                 o.update(
                     bc_u="flowRateOutletVelocity", bc_p="zeroGradient", flow_rate_m3_s=float(fractions[i]) * flow_rate
                 )
@@ -546,28 +713,22 @@ def outlet_plan(
     return plan
 
 
-def split_rcr_of(outlets: dict[str, Any], areas: ArrayLike) -> list[dict[str, float]]:
-    """:func:`split_rcr` of the ``cfd.outlets.rcr`` totals."""
-    r = outlets.get("rcr") or {}
-    return split_rcr(
-        r["resistance"], r["compliance"], areas, proximal_fraction=r.get("proximal_fraction", DEFAULT_PROXIMAL_FRACTION)
-    )
-
-
-def _rcr_entry(k: dict[str, float], outlets: dict[str, Any], flow_rate: float, rho: float) -> dict[str, object]:
-    """The rcr fields of one outlet of :func:`outlet_plan` (SI and kinematic)."""
-    r = outlets.get("rcr") or {}
-    p_d = _finite("the distal pressure", r.get("distal_pressure", 0.0), "Pa")
-    p_c0 = p_d + k["r_d"] * k["fraction"] * flow_rate
+def _rcr_entry(k: dict[str, Any], q_mean: float, rho: float) -> dict[str, object]:
+    """The rcr fields of one outlet of :func:`outlet_plan` (SI and kinematic); the capacitor starts
+    at P_d + R_d Q_k (``q_mean``: the outlet's planned mean flow)."""
+    p_d = float(k["p_distal_pa"])
+    p_c0 = p_d + k["r_d"] * q_mean
     return {
         "bc_p": "rcr",
         "r_p": k["r_p"],
         "c": k["c"],
         "r_d": k["r_d"],
         "p_distal_pa": p_d,
+        "source": k["source"],
         "kinematic": {
             "r_p": k["r_p"] / rho,
             "r_d": k["r_d"] / rho,
+            "c": k["c"] * rho,
             "tau": k["r_d"] * k["c"],
             "p_distal": p_d / rho,
             "p_c0": p_c0 / rho,
@@ -643,9 +804,13 @@ def outlet_summary(
             "fraction": q / inflow if q is not None and inflow else None,
             "mean_pressure_pa": p * rho if p is not None else None,
         }
-        if o.get("type") == "rcr":
+        if o.get("type") in ("rcr", "rcr_fixed_share"):
             entry |= {k: o[k] for k in ("r_p", "c", "r_d", "p_distal_pa")}
-            entry["condition"] = "pressure" if o.get("bc_p") == "rcr" else "flow share"
+            entry["source"] = o.get("source")
+            entry["condition"] = {
+                "windkessel": "Windkessel pressure, implicit",
+                "rcr": "Windkessel pressure, explicit",
+            }.get(str(o.get("bc_p")), "flow share")
         out.append(entry)
     q_out = [e["flow_rate_m3_s"] for e in out]
     total = float(sum(float(q) for q in q_out if q is not None)) if q_out and None not in q_out else None

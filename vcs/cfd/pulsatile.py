@@ -242,9 +242,10 @@ def write_inlet_data(case_dir: Path, state: dict[str, Any], plan: dict[str, Any]
 
 def cycle_records(case_dir: Path, state: dict[str, Any], start: float, end: float) -> dict[str, NDArray[np.floating]]:
     """The inlet-outlet pressure difference (kinematic; the main outlet's pressure when there are
-    branches: :func:`vcs.cfd.outlets.pressure_outlets`), the inlet flow rate and each outlet's
-    (``q_outlets``, (n_outlets, N_PHASE)) and their sum of one cycle, linearly interpolated on
-    ``N_PHASE`` phase points (fraction of the cycle)."""
+    branches: :func:`vcs.cfd.outlets.pressure_outlets`), the inlet flow rate, each outlet's flow rate
+    (``q_outlets``, (n_outlets, N_PHASE)) and their sum, and each outlet's area-mean kinematic
+    pressure (``p_outlets``) of one cycle, linearly interpolated on ``N_PHASE`` phase points
+    (fraction of the cycle)."""
     phase = (np.arange(N_PHASE) + 0.5) / N_PHASE
     tq = start + phase * (end - start)
 
@@ -270,6 +271,7 @@ def cycle_records(case_dir: Path, state: dict[str, Any], start: float, end: floa
         "q_in": -np.sum([series(f"flowRate_{n}") for n in inl], axis=0),
         "q_out": q_outlets.sum(axis=0),
         "q_outlets": q_outlets,
+        "p_outlets": np.array([series(f"pressure_{n}") for n in outl]),
     }
 
 
@@ -277,14 +279,18 @@ def cycle_change(prev: dict[str, Any], cur: dict[str, Any], area: NDArray[np.flo
     """Cycle-to-cycle change of a pulsatile run (SimVascular's and VaMPy's periodicity check, made
     quantitative on three quantities):
 
-        dp:    max_phi |dp_k(phi) - dp_{k-1}(phi)| / max_phi |dp_k(phi)|
-        flow:  max_o max_phi |Q_o,k(phi) - Q_o,k-1(phi)| / max_phi |Q_in,k(phi)|  (o: each outlet)
-        tawss: sqrt(sum_f A_f (TAWSS_k - TAWSS_{k-1})^2 / sum_f A_f TAWSS_k^2)
+        dp:       max_phi |dp_k(phi) - dp_{k-1}(phi)| / max_phi |dp_k(phi)|
+        flow:     max_o max_phi |Q_o,k(phi) - Q_o,k-1(phi)| / max_phi |Q_in,k(phi)|  (o: each outlet)
+        pressure: max_o max_phi |P_o,k(phi) - P_o,k-1(phi)| / max_o max_phi |P_o,k(phi)|
+        tawss:    sqrt(sum_f A_f (TAWSS_k - TAWSS_{k-1})^2 / sum_f A_f TAWSS_k^2)
 
     with phi the phase in the cycle and f the wall faces (TAWSS of each cycle alone). The flow
     check is on each outlet: with one outlet, incompressibility makes its flow the prescribed
     inflow at every instant (the check is then met to the solver's tolerance); with several it
-    is the split between them that has to settle.
+    is the split between them that has to settle. The pressure check is on each outlet's own
+    pressure, not a difference: Windkessel outlets (``rcr``) charge their capacitors over several
+    cycles (time constant R_d C) while the pressure difference across the lumen is already
+    periodic; on p = 0 outlets it is 0.
 
     Parameters
     ----------
@@ -296,9 +302,11 @@ def cycle_change(prev: dict[str, Any], cur: dict[str, Any], area: NDArray[np.flo
     a, b = prev["records"], cur["records"]
     dp = float(np.abs(b["dp"] - a["dp"]).max() / max(np.abs(b["dp"]).max(), 1e-300))
     flow = float(np.abs(b["q_outlets"] - a["q_outlets"]).max() / max(np.abs(b["q_in"]).max(), 1e-300))
+    scale = float(np.abs(b["p_outlets"]).max())
+    pressure = float(np.abs(b["p_outlets"] - a["p_outlets"]).max() / scale) if scale > 0 else 0.0
     t0, t1 = prev["tawss"], cur["tawss"]
     tawss = float(np.sqrt((area * (t1 - t0) ** 2).sum() / max((area * t1**2).sum(), 1e-300)))
-    return {"dp": dp, "flow": flow, "tawss": tawss}
+    return {"dp": dp, "flow": flow, "pressure": pressure, "tawss": tawss}
 
 
 def _wall_field(case_dir: Path, state: dict[str, Any], ranks: int, time_name: str, field: str) -> NDArray[np.floating]:
@@ -364,7 +372,8 @@ def pulsatile_solve(
     pu: dict[str, Any] = {"solver": "pimpleFoam", "evaluated": False, **plan}
     status["pulsatile"] = pu
     status["criterion"] = (
-        f"periodic: cycle-to-cycle change of the pressure difference and outlet flow waveforms < {plan['tolerance']:g}"
+        "periodic: cycle-to-cycle change of the pressure difference, outlet flow and outlet pressure waveforms "
+        f"< {plan['tolerance']:g}"
         f" and of the TAWSS map < {plan['tawss_tolerance']:g} (relative), after at least {plan['cycles']} cycles, "
         f"at most {plan['max_cycles']}"
     )
@@ -419,12 +428,13 @@ def _run_until_periodic(
             ch = cycle_change(cycles[-2], cycle, area)
             changes.append({"cycle": k, **ch})
             progress.info(
-                "cycle %d: change from cycle %d: pressure difference %.2f%%, outlet flow %.2f%% (tolerance %.2g%%), "
-                "TAWSS %.2f%% (tolerance %.2g%%)",
+                "cycle %d: change from cycle %d: pressure difference %.2f%%, outlet flow %.2f%%, outlet pressure "
+                "%.2f%% (tolerance %.2g%%), TAWSS %.2f%% (tolerance %.2g%%)",
                 k,
                 k - 1,
                 100 * ch["dp"],
                 100 * ch["flow"],
+                100 * ch["pressure"],
                 100 * plan["tolerance"],
                 100 * ch["tawss"],
                 100 * plan["tawss_tolerance"],
@@ -438,7 +448,8 @@ def _run_until_periodic(
 
 def _periodic(change: dict[str, float], plan: dict[str, Any]) -> bool:
     """The waveforms within ``periodicity_tolerance`` and the TAWSS map within ``tawss_tolerance``."""
-    return max(change["dp"], change["flow"]) <= plan["tolerance"] and change["tawss"] <= plan["tawss_tolerance"]
+    waveforms = max(change["dp"], change["flow"], change.get("pressure", 0.0))
+    return waveforms <= plan["tolerance"] and change["tawss"] <= plan["tawss_tolerance"]
 
 
 def _verdict(
@@ -448,11 +459,12 @@ def _verdict(
     if periodic:
         status.update(converged=True, criterion_used="periodic_cycles", reason=None)
         return
-    last = changes[-1] if changes else {"dp": math.inf, "flow": math.inf, "tawss": math.inf}
+    last = changes[-1] if changes else {"dp": math.inf, "flow": math.inf, "pressure": math.inf, "tawss": math.inf}
     status["converged"] = False
     status["reason"] = (
         f"not periodic after {n_cycles} cycles (cfd.pulsatile.max_cycles): the last cycle-to-cycle change "
-        f"is pressure difference {100 * last['dp']:.2f}%, outlet flow {100 * last['flow']:.2f}% (tolerance "
+        f"is pressure difference {100 * last['dp']:.2f}%, outlet flow {100 * last['flow']:.2f}%, outlet pressure "
+        f"{100 * last.get('pressure', 0.0):.2f}% (tolerance "
         f"{100 * plan['tolerance']:.2g}%), TAWSS {100 * last['tawss']:.2f}% (tolerance "
         f"{100 * plan['tawss_tolerance']:.2g}%); raise max_cycles"
     )

@@ -165,6 +165,67 @@ def _collect_patches(
         }
 
 
+MMHG_PA = 133.322387415
+"""1 mmHg in Pa."""
+
+
+def cycle_pressures_mmhg(pressure_pa: list[float]) -> dict[str, float]:
+    """Systolic (largest), diastolic (smallest) and mean (the average over the cycle's equally
+    spaced phase points: its time mean) of one cycle's pressure waveform, in mmHg."""
+    p = np.asarray(pressure_pa, dtype=float) / MMHG_PA
+    return {"systolic": float(p.max()), "diastolic": float(p.min()), "mean": float(p.mean())}
+
+
+def write_outlet_waveforms(case_dir: Path, outlets: list[dict[str, Any]]) -> None:
+    """``outlets_last_cycle.csv`` (phase, then each outlet's flow in mL/s and pressure in mmHg over
+    the last cycle) and ``outlets_last_cycle.png`` (both against the phase, one line per outlet) in
+    the case folder, from status.json's ``outlets[*].last_cycle``."""
+    have = [o for o in outlets if o.get("last_cycle")]
+    if not have:
+        return
+    phase = np.asarray(have[0]["last_cycle"]["phase"])
+    cols = [phase]
+    header = ["phase"]
+    for o in have:
+        cols += [
+            np.asarray(o["last_cycle"]["flow_rate_m3_s"]) * 1e6,
+            np.asarray(o["last_cycle"]["pressure_pa"]) / MMHG_PA,
+        ]
+        header += [f"{o['name']}_flow_ml_s", f"{o['name']}_pressure_mmhg"]
+    np.savetxt(
+        case_dir / "outlets_last_cycle.csv",
+        np.column_stack(cols),
+        delimiter=",",
+        header=",".join(header),
+        comments="",
+        fmt="%.8g",
+    )
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6), layout="constrained")
+    for o in have:
+        lc = o["last_cycle"]
+        pm = o.get("pressure_mmhg") or {}
+        label = f"{o['name']} ({100 * (o.get('fraction') or 0):.0f} %)"
+        ax[0].plot(lc["phase"], np.asarray(lc["flow_rate_m3_s"]) * 1e6, label=label)
+        ax[1].plot(
+            lc["phase"],
+            np.asarray(lc["pressure_pa"]) / MMHG_PA,
+            label=f"{o['name']} ({pm.get('systolic', 0):.0f}/{pm.get('diastolic', 0):.0f}, "
+            f"mean {pm.get('mean', 0):.0f})",
+        )
+    ax[0].set(xlabel="phase of the last cycle", ylabel="outlet flow [mL/s]", title="flow (mean split)")
+    ax[1].set(xlabel="phase of the last cycle", ylabel="outlet pressure [mmHg]", title="pressure (sys/dia, mean)")
+    for a in ax:
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7)
+    fig.savefig(case_dir / "outlets_last_cycle.png", dpi=110)
+    plt.close(fig)
+
+
 def _collect_outlets(
     case_dir: Path,
     status: dict[str, Any],
@@ -190,8 +251,6 @@ def _collect_outlets(
         phase = (np.arange(N_WAVEFORM) + 0.5) / N_WAVEFORM
         tq = t1 - float(wf["period_s"]) * (1.0 - phase)
         for o in outlets:
-            if o["type"] != "rcr":
-                continue
             q = function_series(case_dir, f"flowRate_{o['name']}")
             p = function_series(case_dir, f"pressure_{o['name']}")
             if len(q) and len(p):
@@ -200,6 +259,8 @@ def _collect_outlets(
                     "flow_rate_m3_s": [float(x) for x in np.interp(tq, q[:, 0], q[:, 1])],
                     "pressure_pa": [float(x) * rho for x in np.interp(tq, p[:, 0], p[:, 1])],
                 }
+                o["pressure_mmhg"] = cycle_pressures_mmhg(o["last_cycle"]["pressure_pa"])
+        write_outlet_waveforms(case_dir, outlets)
     status["outlets"] = outlets
     status["outlet_mass_balance"] = balance
 

@@ -1,4 +1,4 @@
-"""An inflow waveform: one cardiac cycle of volumetric flow rate, read from a CSV file (pure numpy).
+"""An inflow waveform: one cardiac cycle of volumetric flow rate, read from a CSV or .flow file (pure numpy).
 
 File format (one cycle, closed)::
 
@@ -15,6 +15,13 @@ File format (one cycle, closed)::
   periodic curve is continuous;
 * at least ``MIN_SAMPLES`` rows.
 
+The header names the units: the time column ``time_s`` or ``time_ms``, the flow column
+``flow_rate_l_min`` (L/min), ``flow_ml_s`` / ``flow_rate_ml_s`` (mL/s) or ``flow_m3_s`` /
+``flow_rate_m3_s`` (m^3/s), or cells such as ``time [ms]``, ``flow [L/min]``, ``Q (mL/s)``
+(:data:`TIME_HEADERS`, :data:`FLOW_HEADERS`, :data:`TIME_UNITS`, :data:`FLOW_UNITS`).
+SimVascular's ``.flow`` files (two whitespace-separated columns, s and mL/s, inflow negative) are
+read too (:func:`load_flow_file`: the sign is flipped).
+
 Between the rows the flow is linear; beyond the cycle it repeats (``Q(t + T) = Q(t)``). Every
 number the :class:`Waveform` reports (mean, stroke volume, Fourier coefficients) is computed
 exactly for that periodic piecewise-linear curve. Flows are stored in m^3/s (1 L/min =
@@ -27,6 +34,7 @@ construction and sources are written in its comment lines.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,10 +45,38 @@ from numpy.typing import ArrayLike, NDArray
 from vcs.errors import VCSInputError  # bad input: a ValueError with a one-line message
 
 HEADER = ("time_s", "flow_rate_l_min")
-"""The header's two column names, in this order."""
+"""The default header's two column names, in this order (:data:`TIME_HEADERS`, :data:`FLOW_HEADERS`:
+the others accepted)."""
 
 L_MIN = 1.0 / 60000.0
 """1 L/min in m^3/s."""
+
+TIME_HEADERS = {"time_s": 1.0, "time_ms": 1e-3}
+"""Accepted names of the time column -> seconds per unit."""
+
+FLOW_HEADERS = {
+    "flow_rate_l_min": (L_MIN, "L/min"),
+    "flow_ml_s": (1e-6, "mL/s"),
+    "flow_rate_ml_s": (1e-6, "mL/s"),
+    "flow_m3_s": (1.0, "m^3/s"),
+    "flow_rate_m3_s": (1.0, "m^3/s"),
+}
+"""Accepted names of the flow column -> (m^3/s per unit, the unit)."""
+
+TIME_UNITS = {"s": 1.0, "ms": 1e-3}
+"""Units of a ``time [unit]`` header cell -> seconds per unit."""
+
+FLOW_UNITS = {
+    "l/min": (L_MIN, "L/min"),
+    "ml/s": (1e-6, "mL/s"),
+    "cm3/s": (1e-6, "mL/s"),
+    "cm^3/s": (1e-6, "mL/s"),
+    "m3/s": (1.0, "m^3/s"),
+    "m^3/s": (1.0, "m^3/s"),
+}
+"""Units of a ``flow [unit]`` / ``Q (unit)`` header cell -> (m^3/s per unit, the unit)."""
+
+_UNIT_CELL = re.compile(r"([a-z_ ]+?)\s*[\[(]\s*([a-z0-9^/ ]+?)\s*[\])]")
 
 MIN_SAMPLES = 20
 """Fewest rows of a cycle (a cardiac cycle needs ~20 points to show ejection and diastole)."""
@@ -327,36 +363,71 @@ class Waveform:
         }
 
 
+def _header_units(fields: list[str]) -> tuple[float, float, str] | None:
+    """(seconds per time unit, m^3/s per flow unit, the flow unit) of a header, or None.
+
+    A header cell is a name of :data:`TIME_HEADERS` / :data:`FLOW_HEADERS` (case-insensitive), or a
+    name with its unit in brackets or parentheses: ``time [ms]``, ``t (s)``, ``flow [L/min]``,
+    ``Q (mL/s)`` (units of :data:`TIME_UNITS` / :data:`FLOW_UNITS`).
+    """
+    if len(fields) != 2:
+        return None
+    t_cell, q_cell = (f.strip().lower() for f in fields)
+    t = TIME_HEADERS.get(t_cell)
+    q = FLOW_HEADERS.get(q_cell)
+    m = _UNIT_CELL.fullmatch(t_cell)
+    if t is None and m and m.group(1) in ("time", "t"):
+        t = TIME_UNITS.get(m.group(2).replace(" ", ""))
+    m = _UNIT_CELL.fullmatch(q_cell)
+    if q is None and m and m.group(1) in ("flow", "flow rate", "flow_rate", "q"):
+        q = FLOW_UNITS.get(m.group(2).replace(" ", ""))
+    if t is None or q is None:
+        return None
+    return t, q[0], q[1]
+
+
+def _accepted_headers() -> str:
+    """The accepted headers, for messages."""
+    return (
+        f"time column {' or '.join(TIME_HEADERS)}, flow column {', '.join(FLOW_HEADERS)} "
+        "(or 'time [s]'/'time [ms]' and 'flow [L/min]'/'flow [mL/s]'/'flow [m3/s]')"
+    )
+
+
 def load_waveform(path: str | Path) -> Waveform:
-    """Read one closed cardiac cycle from a CSV file (format: the module docstring).
+    """Read one closed cardiac cycle from a CSV file or a SimVascular ``.flow`` file.
 
     Parameters
     ----------
     path : str or Path
-        CSV file: optional ``#`` comment lines and blank lines, the header ``time_s,flow_rate_l_min``,
-        then one ``time,flow`` row per sample (s, L/min); the first time is 0, the last row closes
-        the cycle (its time is the period, its flow the first row's).
+        CSV file (format: the module docstring): optional ``#`` comment lines and blank lines, a
+        header of two columns, the time (``time_s`` or ``time_ms``) then the flow
+        (``flow_rate_l_min``, ``flow_ml_s``/``flow_rate_ml_s`` or ``flow_m3_s``/``flow_rate_m3_s``;
+        also ``time [ms]``, ``Q (mL/s)``-style cells), then one ``time,flow`` row per sample; the
+        first time is 0, the last row closes the cycle (its time is the period, its flow the first
+        row's). A ``.flow`` file is read by :func:`load_flow_file`.
 
     Returns
     -------
     Waveform
-        Flows converted to m^3/s; ``source`` is the path.
+        Times in s, flows converted to m^3/s; ``source`` is the path.
 
     Raises
     ------
     VCSInputError
-        One line naming the file, the line (1-based, as an editor shows it) and the fix: no or a
-        wrong header, a row without two numbers, a value that is not a finite number, times not
-        strictly increasing, a first time other than 0, fewer than :data:`MIN_SAMPLES` rows, or a
-        cycle that is not closed.
+        One line naming the file, the line (1-based, as an editor shows it) and the fix: no header
+        or one with no accepted column names (the message lists them), a row without two
+        numbers, a value that is not a finite number, times not strictly increasing, a first time
+        other than 0, fewer than :data:`MIN_SAMPLES` rows, or a cycle that is not closed.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as e:
-        raise VCSInputError(f"cannot read waveform {path}: {e.strerror or e}; check the path") from None
+    if path.suffix.lower() == ".flow":
+        return load_flow_file(path)
+    text = _read(path)
     where = f"waveform {path}"
     header_line = None
+    units: tuple[float, float, str] = (1.0, L_MIN, "L/min")
+    names: tuple[str, str] = HEADER
     lines: list[int] = []
     values: list[tuple[float, float]] = []
     for number, raw in enumerate(text.splitlines(), start=1):
@@ -365,44 +436,116 @@ def load_waveform(path: str | Path) -> Waveform:
             continue
         fields = [f.strip() for f in line.split(",")]
         if header_line is None:
-            if tuple(fields) != HEADER:
+            found = _header_units(fields)
+            if found is None:
                 raise VCSInputError(
-                    f"{where}: line {number}: header {line[:60]!r} is not {','.join(HEADER)!r}; "
-                    f"the first line that is not a # comment must be exactly {','.join(HEADER)}"
+                    f"{where}: line {number}: header {line[:60]!r} is not a known one; the first line that is not "
+                    f"a # comment must name the two columns: {_accepted_headers()}, e.g. {','.join(HEADER)}"
                 )
-            header_line = number
+            units, names, header_line = found, (fields[0], fields[1]), number
             continue
         if len(fields) != 2:
             raise VCSInputError(
-                f"{where}: line {number}: {len(fields)} values, expected 2 (time in s, flow in L/min); "
+                f"{where}: line {number}: {len(fields)} values, expected 2 ({names[0]}, {names[1]}); "
                 "write one 'time,flow' pair per line"
             )
-        row = []
-        for name, f in zip(HEADER, fields):
-            try:
-                x = float(f)
-            except ValueError:
-                raise VCSInputError(
-                    f"{where}: line {number}: {name} {f[:30]!r} is not a number; write decimal numbers"
-                ) from None
-            if not math.isfinite(x):
-                raise VCSInputError(f"{where}: line {number}: {name} is {f!r}; give finite numbers")
-            row.append(x)
+        row = [_value(f, name, where, number) for name, f in zip(names, fields)]
         lines.append(number)
         values.append((row[0], row[1]))
     if header_line is None:
         raise VCSInputError(
             f"{where}: line 1: no header line; start the table with the line {','.join(HEADER)} "
-            "(after any # comment lines)"
+            f"(after any # comment lines; accepted: {_accepted_headers()})"
         )
     if not values:
         raise VCSInputError(
             f"{where}: line {header_line}: no rows after the header; give one cycle, "
-            f"at least {MIN_SAMPLES} rows of time_s,flow_rate_l_min"
+            f"at least {MIN_SAMPLES} rows of {names[0]},{names[1]}"
         )
+    return _cycle(path, lines, np.array(values, dtype=float), units)
+
+
+def load_flow_file(path: str | Path) -> Waveform:
+    """Read SimVascular's ``.flow`` file (e.g. ``inflow.flow``): one cardiac cycle of inflow.
+
+    Two whitespace-separated columns per line, the time (s) and the flow rate (mL/s = cm^3/s),
+    negative into the model by SimVascular's convention (the flow along the outward normal of the
+    inlet face): the sign is flipped, so that the waveform is positive along the inflow
+    direction as every waveform of this package. Blank and ``#`` lines are skipped. The cycle rules
+    are those of the CSV (first time 0, strictly increasing, closed, at least :data:`MIN_SAMPLES`
+    rows).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.flow`` file.
+
+    Returns
+    -------
+    Waveform
+        Flows in m^3/s (1 mL/s = 1e-6 m^3/s), positive into the vessel.
+
+    Raises
+    ------
+    VCSInputError
+        One line naming the file and line: a line without two numbers, a cycle rule broken, or a
+        file whose mean flow is positive (flow out of the model in SimVascular's convention: negate
+        its flows).
+    """
+    path = Path(path)
+    text = _read(path)
+    where = f"waveform {path}"
+    lines: list[int] = []
+    values: list[tuple[float, float]] = []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.replace(",", " ").split()
+        if len(fields) != 2:
+            raise VCSInputError(
+                f"{where}: line {number}: {len(fields)} values, expected 2 (time in s, flow in mL/s); "
+                "write one 'time flow' pair per line"
+            )
+        t, q = (_value(f, name, where, number) for name, f in zip(("time", "flow"), fields))
+        lines.append(number)
+        values.append((t, -q))  # SimVascular: inflow negative
+    if not values:
+        raise VCSInputError(f"{where}: no 'time flow' lines; give one cycle, at least {MIN_SAMPLES} lines")
     arr = np.array(values, dtype=float)
-    t, q = arr[:, 0], arr[:, 1] * L_MIN
-    problem = _cycle_problem(t, arr[:, 1], "L/min")
+    w = _cycle(path, lines, arr, (1.0, 1e-6, "mL/s (sign flipped)"))
+    if not w.mean_m3_s > 0.0:
+        raise VCSInputError(
+            f"{where}: the mean flow is {-w.mean_m3_s * 1e6:.4g} mL/s, out of the model by SimVascular's convention "
+            "(inflow is negative in a .flow file); negate the flows of the file"
+        )
+    return w
+
+
+def _read(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except OSError as e:
+        raise VCSInputError(f"cannot read waveform {path}: {e.strerror or e}; check the path") from None
+
+
+def _value(text: str, name: str, where: str, number: int) -> float:
+    """A finite number of a waveform file, or a one-line error naming the line."""
+    try:
+        x = float(text)
+    except ValueError:
+        raise VCSInputError(
+            f"{where}: line {number}: {name} {text[:30]!r} is not a number; write decimal numbers"
+        ) from None
+    if not math.isfinite(x):
+        raise VCSInputError(f"{where}: line {number}: {name} is {text!r}; give finite numbers")
+    return x
+
+
+def _cycle(path: Path, lines: list[int], arr: NDArray[np.floating], units: tuple[float, float, str]) -> Waveform:
+    """The waveform of the samples ``arr`` (time, flow in the file's units), checked as a cycle."""
+    t, q = arr[:, 0] * units[0], arr[:, 1] * units[1]
+    problem = _cycle_problem(t, arr[:, 1], units[2])
     if problem is not None:
-        raise VCSInputError(f"{where}: line {lines[problem[0]]}: {problem[1]}")
+        raise VCSInputError(f"waveform {path}: line {lines[problem[0]]}: {problem[1]}")
     return Waveform(t, q, float(t[-1]), str(path))

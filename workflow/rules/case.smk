@@ -9,6 +9,7 @@ rule openfoam_case:
         stl=case_stl,  # the model wall (cfd geometry model) or the patient's lumen (surface)
         model="results/patients/{id}/fit/model.json",  # sizes the mesh (cfd.mesh.cell_size: auto)
         waveform=waveform_input,  # the inflow waveform CSV of a pulsatile run (none: steady)
+        outlet_bc=outlet_bc_input,  # the per-outlet RCR table (sheet's outlet_bc) and its cap files (none: none)
     output:
         case=directory("results/patients/{id}/case_setup"),
     params:

@@ -19,7 +19,7 @@ DEMO_MESH = re.compile(r"results/demo/(?P<kind>aorta|tube|torus|helix)_seed(?P<s
 SHEET_COLUMNS = (
     "id", "mesh", "units", "inlet", "outlet", "inlet_cap", "outlet_cap",
     "cell_size_mm", "flow_rate_l_min", "inlet_velocity_m_s", "valve_area_cm2", "inflow_waveform",
-    "cfd_geometry", "outlets", "rcr_resistance_mmhg_s_ml", "rcr_compliance_ml_mmhg",
+    "cfd_geometry", "outlets", "rcr_resistance_mmhg_s_ml", "rcr_compliance_ml_mmhg", "outlet_bc",
 )
 # optional per-patient CFD columns: number in the sheet's unit -> (key of vcs.cfd.render_case's
 # `patient`, factor to SI); cell_size_mm may also be `auto`
@@ -146,6 +146,36 @@ def _check_waveform(path, where):
         fail(f"{where}: {exc}")
 
 
+def _check_outlet_bc(record, where):
+    """A patient's per-outlet RCR table (outlet_bc: CSV, or rcrt.dat by its .dat suffix) is read at
+    planning time (vcs.cfd.bc_tables): a bad value, unknown units or two rows on one end stop the
+    workflow with one line. In the main process (not again in every job) its rows are also matched
+    to the surface's ends as `vcs ends` lists them (~1 s a patient): a row naming no end, the inlet
+    or another row's end (and, for cfd geometry surface, an outlet end without a row) stops it
+    with one line naming the row and the ends."""
+    from vcs.cfd.bc_tables import check_outlet_bc, read_outlet_bc, surface_ends
+    from vcs.errors import VCSInputError
+
+    try:
+        read_outlet_bc(record["outlet_bc"])
+    except VCSInputError as exc:
+        fail(f"{where}: {exc}")
+    if not workflow.is_main_process or not Path(record["mesh"]).is_file():
+        return
+    try:
+        surface = surface_ends(record["mesh"], record.get("units", "auto"))
+    except Exception:  # an unreadable mesh is the fit's to report (a per-patient failure)
+        return
+    geometry = record.get("cfd_geometry") or config["cfd"].get("geometry", "model")
+    try:
+        check_outlet_bc(
+            record["outlet_bc"], record["mesh"], units=surface[2], surface=surface,
+            inlet=record.get("inlet") or record.get("inlet_cap"), complete=geometry == "surface",
+        )
+    except VCSInputError as exc:
+        fail(f"{where}: {exc}")
+
+
 def cfd_geometry(wildcards):
     """The lumen the patient's CFD runs on: the sheet's cfd_geometry, else cfd.geometry (model)."""
     return PATIENTS[wildcards.id].get("cfd_geometry") or config["cfd"].get("geometry", "model")
@@ -165,6 +195,18 @@ def waveform_input(wildcards):
     own = PATIENTS[wildcards.id].get("inflow_waveform")
     path = own or config["cfd"].get("inlet", {}).get("waveform")
     return [path] if path else []
+
+
+def outlet_bc_input(wildcards):
+    """The patient's per-outlet RCR table and the cap files its rows name, or none: inputs of the
+    case, so that editing them reruns that patient's CFD."""
+    path = PATIENTS[wildcards.id].get("outlet_bc")
+    if not path:
+        return []
+    from vcs.cfd.bc_tables import SURFACE_SUFFIXES, read_outlet_bc
+
+    caps = [r.end for r in read_outlet_bc(path) if Path(r.end).suffix.lower() in SURFACE_SUFFIXES]
+    return [path, *dict.fromkeys(c for c in caps if Path(c).is_file())]
 
 
 def _number_range(column):
@@ -255,7 +297,7 @@ def load_patients(sheet):
                         f"patients sheet '{sheet}' line {n} (id {pid}): {column} '{record[column]}' is not a point of "
                         "three finite numbers x,y,z (mesh units); or give an end listed by `vcs ends`: end:N or NAME=VALUE"
                     )
-        for column in ("mesh", "inlet_cap", "outlet_cap", "inflow_waveform"):
+        for column in ("mesh", "inlet_cap", "outlet_cap", "inflow_waveform", "outlet_bc"):
             if column in record:
                 _check_file(record[column], sheet, n, pid, column)
         given = [c for c in PATIENT_RCR_COLUMNS if c in record]
@@ -265,6 +307,18 @@ def load_patients(sheet):
                 f"patients sheet '{sheet}' line {n} (id {pid}): {given[0]} is given but this patient's outlets "
                 f"are {kind}; set its outlets column to rcr (or leave {given[0]} empty)"
             )
+        if "outlet_bc" in record:
+            if kind != "rcr" and record.get("outlets"):
+                fail(
+                    f"patients sheet '{sheet}' line {n} (id {pid}): outlet_bc gives every outlet an RCR but this "
+                    f"patient's outlets are {kind}; set its outlets column to rcr (or leave it empty)"
+                )
+            if given:
+                fail(
+                    f"patients sheet '{sheet}' line {n} (id {pid}): outlet_bc gives every outlet's RCR; "
+                    f"leave {given[0]} empty (the totals split by Murray's law do not apply)"
+                )
+            _check_outlet_bc(record, f"patients sheet '{sheet}' line {n} (id {pid}): outlet_bc")
         if "inflow_waveform" in record:
             if "flow_rate_l_min" in record or "inlet_velocity_m_s" in record:
                 fail(
@@ -357,7 +411,8 @@ def cfd_params():
 
 def patient_cfd(wildcards):
     """The patient's own CFD values from the sheet, in SI units (vcs.cfd.render_case `patient`):
-    cell_size (m or "auto"), flow_rate (m3/s), velocity (m/s) + valve_area (m2). A param, so
+    cell_size (m or "auto"), flow_rate (m3/s), velocity (m/s) + valve_area (m2), waveform, outlets,
+    outlet_bc + mesh (paths: the per-outlet RCR table and the surface its end:N rows name). A param, so
     editing one patient's values reruns that patient's CFD only."""
     row = PATIENTS[wildcards.id]
     out = {"waveform": row["inflow_waveform"]} if row.get("inflow_waveform") else {}
@@ -373,6 +428,8 @@ def patient_cfd(wildcards):
         outlets["rcr"] = rcr
     if outlets:
         out["outlets"] = outlets
+    if row.get("outlet_bc"):  # the per-outlet RCR table, and the surface its end:N rows are ends of
+        out.update(outlet_bc=row["outlet_bc"], mesh=row["mesh"])
     return out
 
 
