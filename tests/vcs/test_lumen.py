@@ -151,3 +151,85 @@ def test_branch_ends_are_refined_to_the_cells_asked_for():
     assert got["branch_2"]["level"] == [4, 4] and got["branch_2"]["cells_across"] == pytest.approx(14.4)
     # a branch already resolved at the outlet level keeps it
     assert branch_levels({"branch_1": 0.05}, hb, [1, 2], 8.0)["branch_1"]["level"] == [1, 2]
+
+
+# --------------------------------------------------------------------------- planar ends, extensions
+
+
+def _wavy_tube() -> Surface:
+    """The straight tube (r 5 mm, z 0..60) with its z = 60 end tilted (0.4 mm/mm) and wavy (+-1 mm, 3 waves)."""
+    s = _straight_tube()
+    v = s.vertices.copy()
+    w = (v[:, 2] / 60.0) ** 6
+    v[:, 2] += w * (0.4 * v[:, 0] + np.cos(3 * np.arctan2(v[:, 1], v[:, 0])))
+    return Surface(v, s.faces, {}, "mm", "given", "wavy tube")
+
+
+def _off_plane(tris: np.ndarray) -> tuple[float, float]:
+    """(largest distance of the triangles' vertices from their best-fit plane, their diameter)."""
+    from vcs.lumen import end_plane
+
+    _, _, dev, diam = end_plane(np.unique(tris.reshape(-1, 3), axis=0))
+    return dev, diam
+
+
+def test_wavy_tilted_end_is_cut_planar_and_extended():
+    surf = _wavy_tube()
+    ring = surf.vertices[np.isclose(_straight_tube().vertices[:, 2], 60.0)]  # the wavy end loop
+    lumen = build_lumen(surf, np.zeros(3), np.array([0.0, 0.0, 60.0]), extend_outlet=1.0)
+    assert _watertight(lumen.solids)
+    out = lumen.ends[1]
+    assert out.name == "outlet" and any("cut flat" in n for n in lumen.notes)
+    dev, diam = _off_plane(lumen.solids["outlet"])
+    assert dev < 1e-6 * diam, (dev, diam)
+    # the cut is inside the vessel: every vertex of the wavy end beyond it (0.02 diameters beyond the innermost)
+    n_out = -out.normal
+    assert n_out @ [-0.4, 0.0, 1.0] / np.hypot(0.4, 1.0) > 0.999  # the tilt's plane
+    # the extension: one equivalent diameter along the outward normal, a prism of the cut end's shape
+    d = 2.0 * np.sqrt(out.area / np.pi)
+    assert out.extension == pytest.approx(d, rel=1e-9)
+    cut = out.center - out.extension * n_out  # the cut end's centre, where the extension starts
+    assert ((ring - cut) @ n_out > 0).all()  # the cut is inside the vessel: the whole wavy loop beyond it
+    np.testing.assert_allclose(out.opening_center, [0.0, 0.0, 60.0], atol=0.1)  # matched where it was
+    # the untouched inlet keeps its fan, and no extension was asked for it
+    assert lumen.ends[0].extension == 0.0
+    np.testing.assert_allclose(lumen.ends[0].center, [0.0, 0.0, 0.0], atol=1e-9)
+
+
+def test_far_faces_turned_to_the_grid_and_extension_refused_when_crossing():
+    # a planar end tilted 20 degrees: its far face on the grid plane z = const (a wedge, >= 1 edge long)
+    s = _straight_tube()
+    v = s.vertices.copy()
+    v[:, 2] += (v[:, 2] / 60.0) ** 6 * np.tan(np.radians(20)) * v[:, 0]
+    lumen = build_lumen(
+        Surface(v, s.faces, {}, "mm", "given", "tilted"), np.zeros(3), np.array([0.0, 0.0, 60.0]), grid="axes"
+    )
+    assert _watertight(lumen.solids)
+    np.testing.assert_allclose(lumen.ends[1].normal, [0.0, 0.0, -1.0], atol=1e-12)
+    tri = lumen.solids["outlet"].reshape(-1, 3)
+    assert np.ptp(tri[:, 2]) < 1e-9 and tri[:, 2].min() > v[:, 2].max()
+    with pytest.raises(VCSInputError, match="must be a length >= 0"):
+        build_lumen(_straight_tube(), np.zeros(3), np.array([0.0, 0.0, 60.0]), extend_outlet=-1.0)
+
+
+@pytest.mark.realdata
+def test_bifurcation_ends_planar_extended_on_the_grid(shared_data):
+    mesh = shared_data / "vmtk_aorta_bifurcation_open.stl"
+    c_in, c_out = np.array([221.03, 177.80, 21.30]), np.array([235.24, 101.57, 29.16])
+    surf = read_lumen_surface(mesh, "mm", c_in, c_out)
+    plain = build_lumen(surf, c_in, c_out)
+    lumen = build_lumen(surf, c_in, c_out, extend_outlet=1.0, grid="axes")
+    assert _watertight(lumen.solids)
+    assert lumen.volume_mm3 > plain.volume_mm3
+    for e, e0 in zip(lumen.ends, plain.ends):
+        assert e.name == e0.name
+        dev, diam = _off_plane(lumen.solids[e.name])
+        assert dev < 1e-6 * diam, (e.name, dev, diam)
+        # the far face on a plane of the grid (the ends are ~8 degrees off y), matched at the opening
+        np.testing.assert_allclose(np.abs(e.normal), [0.0, 1.0, 0.0], atol=1e-12)
+        np.testing.assert_allclose(e.opening_center, e0.center, atol=1e-9)
+        d = 2.0 * np.sqrt(e0.area / np.pi)
+        if e.role == "inlet":  # extend_inlet 0: only the wedge to the grid plane
+            assert 0 < e.extension < 0.25 * d
+        else:
+            assert e.extension == pytest.approx(d, rel=0.05)

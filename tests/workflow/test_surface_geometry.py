@@ -52,8 +52,11 @@ def test_bifurcation_surface_murray_and_resistance_outlets(tmp_path, workdir_fac
         assert geo["type"] == "surface"
         ends = {e["name"]: e for e in geo["ends"]}
         assert {n: e["role"] for n, e in ends.items()} == {"inlet": "inlet", "outlet": "outlet", "branch_1": "branch"}
+        # the patches are at the far ends of the flow extensions; each end's opening is where it was
+        lumen = json.loads((res / pid / "lumen" / "ends.json").read_text())
+        opening = {e["name"]: e["opening_center"] for e in lumen["ends"]}
         for name, c in ENDS_MM.items():
-            np.testing.assert_allclose(np.array(ends[name]["center_m"]) * 1e3, c, atol=0.05)
+            np.testing.assert_allclose(np.array(opening[name]) * 1e3, c, atol=0.05)
         q_in = s["inflow"]["flow_rate_m3_s"]
         assert q_in == pytest.approx(1.0e-3 / 60, rel=1e-9)
         # steady SIMPLE settles at this Re (~400; at 2 L/min the transient fallback took ~5 min each)

@@ -44,6 +44,7 @@ end's equivalent radius), the rule by which the lumen finds the section's ends
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import re
@@ -562,6 +563,20 @@ def solid_ends(solids: Mapping[str, ArrayLike], units: str = "m") -> list[PatchE
     return out
 
 
+def lumen_ends(ends_json: str | Path) -> list[PatchEnd]:
+    """The ends of a lumen (``vcs lumen``'s ``ends.json``) as PatchEnd: each at its opening on the
+    input surface (``opening_center``; the patch itself may lie a flow extension further out), with
+    its equivalent radius, mm."""
+    info = json.loads(Path(ends_json).read_text())
+    s = UNIT_TO_MM[str(info.get("units", "m"))]
+    out = []
+    for e in info["ends"]:
+        role = "inlet" if e["role"] == "inlet" else "outlet"
+        centre = np.asarray(e.get("opening_center") or e["center"], float) * s
+        out.append(PatchEnd(str(e["name"]), role, centre, float(e["equivalent_radius"]) * s))
+    return out
+
+
 def cap_centroid(vertices: ArrayLike, faces: ArrayLike) -> NDArray[np.floating]:
     """Area centroid of a cap surface.
 
@@ -697,6 +712,7 @@ def outlet_rcrs(
     *,
     units: str,
     mesh: str | Path | None = None,
+    ends: Sequence[PatchEnd] | None = None,
 ) -> dict[str, dict[str, float]]:
     """The RCR of every outlet patch of a case, from the patient's table (``outlet_bc``).
 
@@ -717,6 +733,10 @@ def outlet_rcrs(
     mesh : str or Path, optional
         The patient's surface (the sheet's ``mesh``): needed for ``end:N`` / ``NAME=VALUE`` rows;
         its folder is also searched for the cap files of ``rcrt.dat`` face names.
+    ends : sequence of PatchEnd, optional
+        The patches' ends to match instead of the solids' centres: a lumen's openings on the input
+        surface (:func:`lumen_ends`), where the rows point, when its patches sit at the far ends of
+        flow extensions.
 
     Returns
     -------
@@ -734,7 +754,9 @@ def outlet_rcrs(
         raise VCSInputError(f"mesh units {units!r} must be one of {', '.join(UNIT_TO_MM)}")
     rows = read_outlet_bc(path)
     found = resolve_ends(rows, path, units=units, mesh=mesh)
-    matched = match_outlet_table(rows, solid_ends(solids, "m"), units=units, **found)
+    matched = match_outlet_table(
+        rows, list(ends) if ends is not None else solid_ends(solids, "m"), units=units, **found
+    )
     return {name: row.to_dict() for name, row in matched.items()}
 
 

@@ -483,7 +483,7 @@ def render_case(
     local = {k: (t - origin) @ axes.T for k, t in solids.items()}
     plan = _mesh_plan(cfd["mesh"], solids, roles, local, model, own.get("cell_size"))
     inflow, waveform = _applied_inflow(cfd, solids, roles, own)
-    table = patient_outlet_table(own, solids, model, cfd)
+    table = patient_outlet_table(own, solids, model, cfd, Path(stl_path).with_name("ends.json"))
     outlets = case_outlets(solids, roles, cfd, inflow["flow_rate_m3_s"], waveform, table=table)
     jet = jet_region(solids, cfd, background=plan["hb"], min_level=plan["k"])
     bg, corners, inside, finest = _placement(cfd["mesh"], plan, jet, local, origin, axes)
@@ -706,14 +706,20 @@ def _placement(
 
 
 def patient_outlet_table(
-    own: dict[str, Any], solids: dict[str, NDArray[np.floating]], model: Any, cfd: dict[str, Any]
+    own: dict[str, Any],
+    solids: dict[str, NDArray[np.floating]],
+    model: Any,
+    cfd: dict[str, Any],
+    ends_json: Path | None = None,
 ) -> dict[str, dict[str, float]] | None:
     """The patient's per-outlet RCRs by patch name (:func:`vcs.cfd.bc_tables.outlet_rcrs` of the
     sheet's ``outlet_bc``, in the mesh's units from its model), or None; a table makes the outlets
-    ``rcr`` (``cfd["outlets"]["type"]`` is set so), any other outlet type given with it is refused."""
+    ``rcr`` (``cfd["outlets"]["type"]`` is set so), any other outlet type given with it is refused.
+    A lumen's rows are matched to its openings on the input surface (``ends_json``, beside the
+    lumen's STL, when it exists), not to its patches at the ends of the flow extensions."""
     if not own.get("outlet_bc"):
         return None
-    from vcs.cfd.bc_tables import outlet_rcrs
+    from vcs.cfd.bc_tables import lumen_ends, outlet_rcrs
 
     kind = cfd["outlets"].get("type", "free")
     own_kind = (own.get("outlets") or {}).get("type")
@@ -731,7 +737,8 @@ def patient_outlet_table(
 
             model = VesselModel.load(model)
         units = str(getattr(model, "units", "m"))
-    return outlet_rcrs(own["outlet_bc"], solids, units=units, mesh=own.get("mesh"))
+    ends = lumen_ends(ends_json) if ends_json is not None and ends_json.is_file() else None
+    return outlet_rcrs(own["outlet_bc"], solids, units=units, mesh=own.get("mesh"), ends=ends)
 
 
 def case_outlets(

@@ -17,7 +17,9 @@ def cmd_lumen(args: argparse.Namespace) -> None:
     args : argparse.Namespace
         ``mesh`` (the surface the model was fitted to), ``model`` (its model.json: the section's
         end centres and the mesh's units), ``output`` (.stl), ``ends`` (.json of the ends, or None)
-        and ``units`` (of the STL and the JSON: mm, cm or m).
+        ``units`` (of the STL and the JSON: mm, cm or m), ``extend_inlet``/``extend_outlet`` (flow
+        extensions in end diameters, every branch end takes the outlet's) and ``grid`` (the CFD's
+        background grid frame the far faces are turned to: none, axes or inlet).
 
     Raises
     ------
@@ -38,7 +40,9 @@ def cmd_lumen(args: argparse.Namespace) -> None:
     c_in = np.asarray(model.meta["inlet_center_mm"], float)
     c_out = np.asarray(model.meta["outlet_center_mm"], float)
     surf = read_lumen_surface(args.mesh, model.units, c_in, c_out)
-    lumen = build_lumen(surf, c_in, c_out)
+    lumen = build_lumen(
+        surf, c_in, c_out, extend_inlet=args.extend_inlet, extend_outlet=args.extend_outlet, grid=args.grid
+    )
     with atomic_file(out) as tmp:
         info = write_lumen(lumen, tmp, None, units=args.units)
     if ends_out is not None:
@@ -67,4 +71,16 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="output .stl (solids wall, inlet, outlet, branch_<k>)")
     p.add_argument("--ends", default=None, help="also write the ends (name, role, centre, area, source) as .json")
     p.add_argument("--units", default="m", choices=["mm", "cm", "m"], help="units of the outputs (OpenFOAM: m)")
+    p.add_argument(
+        "--extend-inlet", type=float, default=0.0, help="straight inlet extension, diameters (as `vcs wall`)"
+    )
+    p.add_argument(
+        "--extend-outlet", type=float, default=0.0, help="straight extension of the outlet and every branch, diameters"
+    )
+    p.add_argument(
+        "--grid",
+        default="none",
+        choices=["none", "axes", "inlet"],
+        help="the CFD background grid (cfd.mesh.background_frame): an end within 30 degrees of a grid plane ends on it",
+    )
     p.set_defaults(func=cmd_lumen)

@@ -94,6 +94,12 @@ rule vcs_lumen:
     output:
         stl="results/patients/{id}/lumen/lumen.stl",
         ends="results/patients/{id}/lumen/ends.json",
+    params:
+        # the model wall's flow extensions (every branch end takes the outlet's), far faces turned to
+        # the CFD's background grid (vcs.lumen.build_lumen)
+        extend_inlet=config["wall"]["extend_inlet"],
+        extend_outlet=config["wall"]["extend_outlet"],
+        grid=config.get("cfd", {}).get("mesh", {}).get("background_frame", "axes"),
     log:
         "results/logs/vcs_lumen/{id}.log",
     benchmark:
@@ -101,5 +107,6 @@ rule vcs_lumen:
     shell:
         "python \"$VCS_FAILURE_SCRIPT\" propagate --patient {wildcards.id} --log {log:q} --upstream {input.model:q}"
         " -- {output:q} || vcs lumen {input.mesh:q} --model {input.model:q} -o {output.stl:q} --ends {output.ends:q}"
-        " --units m > {log:q} 2>&1"
+        " --units m --extend-inlet {params.extend_inlet} --extend-outlet {params.extend_outlet} --grid {params.grid}"
+        " > {log:q} 2>&1"
         " || python \"$VCS_FAILURE_SCRIPT\" record lumen $? --patient {wildcards.id} --log {log:q} -- {output:q}"

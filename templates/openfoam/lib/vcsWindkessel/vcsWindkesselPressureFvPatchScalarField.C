@@ -97,6 +97,7 @@ vcsWindkesselPressureFvPatchScalarField
 {}
 
 
+#ifdef OPENFOAM
 Foam::vcsWindkesselPressureFvPatchScalarField::
 vcsWindkesselPressureFvPatchScalarField
 (
@@ -115,6 +116,7 @@ vcsWindkesselPressureFvPatchScalarField
     rAUName_(ptf.rAUName_),
     implicit_(ptf.implicit_)
 {}
+#endif
 
 
 Foam::vcsWindkesselPressureFvPatchScalarField::
@@ -240,22 +242,34 @@ void Foam::vcsWindkesselPressureFvPatchScalarField::updateCoeffs()
 }
 
 
+#ifdef OPENFOAM
+    #define VCS_WRITE(key, value) os.writeEntry(key, value)
+#else
+    #define VCS_WRITE(key, value) writeEntry(os, key, value)
+#endif
+
 void Foam::vcsWindkesselPressureFvPatchScalarField::write(Ostream& os) const
 {
     fvPatchScalarField::write(os);
-    os.writeEntry("Rp", Rp_);
-    os.writeEntry("C", C_);
-    os.writeEntry("Rd", Rd_);
-    os.writeEntry("Pd", Pd_);
-    os.writeEntry("Pc", Pc_);
-    os.writeEntry("tState", tState_);
-    os.writeEntry("phi", phiName_);
+    VCS_WRITE("Rp", Rp_);
+    VCS_WRITE("C", C_);
+    VCS_WRITE("Rd", Rd_);
+    VCS_WRITE("Pd", Pd_);
+    VCS_WRITE("Pc", Pc_);
+    VCS_WRITE("tState", tState_);
+    VCS_WRITE("phi", phiName_);
     if (!rAUName_.empty())
     {
-        os.writeEntry("rAU", rAUName_);
+        VCS_WRITE("rAU", rAUName_);
     }
+#ifdef OPENFOAM
     this->writeEntry("value", os);
+#else
+    writeEntry(os, "value", *this);
+#endif
 }
+
+#undef VCS_WRITE
 
 
 // * * * * * * * * * * * * * * Build Macro Function  * * * * * * * * * * * * //
