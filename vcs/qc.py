@@ -11,7 +11,8 @@ Nine panels on three rows, each drawn from the patient's own files (:func:`write
 3. the same residual over the (tau, theta) plane (the paper's Fig. 4), for reading values;
 4. a slice of the CFD mesh through the centerline's best-fit plane, cell edges drawn;
 5. a close-up of that slice at the wall, half-way along the vessel: the near-wall (layer) cells;
-6. the solver's residual history (``residuals.csv``) and the convergence verdict;
+6. the solver's residual history (``residuals.csv``) and the convergence verdict (a pulsatile run
+   with its outlets' last cycle: each outlet's pressure and flow over it instead);
 7. |U| on that slice (m/s; the time average when the run was averaged);
 8. the wall shear stress magnitude on the CFD wall (Pa; time-averaged likewise);
 9. for a transient or pulsatile run the figure its verdict was made on (``transient.png``: the
@@ -454,9 +455,40 @@ def panel_mesh_wall(ax: Axes, d: SheetData) -> None:
     ax.set_title(f"near-wall cells at tau = {tau:.2f} (wall at the top), {2 * half:.2g} mm high\n{layers}")
 
 
+def panel_outlet_waveforms(ax: Axes, d: SheetData) -> bool:
+    """Panel 6 of a pulsatile run with its outlets' last cycle in status.json: each outlet's
+    pressure (mmHg, solid) and flow (mL/s, dashed, right axis) over the last cycle, the legend with
+    its systolic/diastolic/mean pressure and realised mean split. False when there is none."""
+    outlets = [o for o in (d.status or {}).get("outlets") or [] if o.get("last_cycle")]
+    if not outlets:
+        return False
+    mmhg = 133.322387415  # Pa (vcs.cfd.status.MMHG_PA, not imported: the sheet's imports stay light)
+    right = ax.twinx()
+    for k, o in enumerate(outlets):
+        lc, pm = o["last_cycle"], o.get("pressure_mmhg") or {}
+        colour = f"C{k % 10}"
+        label = (
+            f"{o['name']}: {pm.get('systolic', np.nan):.0f}/{pm.get('diastolic', np.nan):.0f} "
+            f"({pm.get('mean', np.nan):.0f}) mmHg, {100 * (o.get('fraction') or np.nan):.0f} %"
+        )
+        ax.plot(lc["phase"], np.asarray(lc["pressure_pa"]) / mmhg, color=colour, lw=1.2, label=label)
+        right.plot(lc["phase"], np.asarray(lc["flow_rate_m3_s"]) * 1e6, color=colour, lw=0.8, ls="--")
+    ax.set(xlabel="phase of the last cycle", ylabel="outlet pressure (mmHg), solid")
+    right.set_ylabel("outlet flow (mL/s), dashed")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title("outlets over the last cycle: sys/dia (mean), mean split")
+    ax.set_aspect("auto")
+    return True
+
+
 def panel_residual_history(ax: Axes, d: SheetData) -> None:
-    """Panel 6: the solver's initial residuals per iteration (``residuals.csv``)."""
+    """Panel 6: the solver's initial residuals per iteration (``residuals.csv``); a pulsatile run's
+    outlets over its last cycle instead when it has them (:func:`panel_outlet_waveforms`)."""
     import csv
+
+    if panel_outlet_waveforms(ax, d):
+        return
 
     path = d.files.case_dir / "residuals.csv" if d.files.case_dir else None
     if path is None or not path.is_file():
