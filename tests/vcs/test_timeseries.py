@@ -136,10 +136,47 @@ def test_simple_early_stop(tmp_path, name, residuals, stops, stalled):
     _simple_log(log, residuals)
     watch = PlateauWatch(tmp_path, {"plateau": {"iterations": 100, "max_residual": 1e-3, "early_stop": True}})
     watch(log)
-    assert ("writeNow" in control.read_text()) is stops, name
+    # the whole log at once: stopped ahead of the solver when the log is short of decision + lead,
+    # else where it is (writeNow)
+    text = control.read_text()
+    assert ("writeNow" in text or "endTime         " in text) is stops, name
     assert (watch.stopped_at is not None) is stops and watch.stalled is stalled
     if stops:
-        assert watch.report()["above_max_residual"] is stalled
+        rep = watch.report()
+        assert rep["above_max_residual"] is stalled and rep["deterministic"] is ("writeNow" not in text)
+
+
+def test_simple_early_stop_does_not_depend_on_when_the_log_is_read(tmp_path):
+    """Issue 38: the plateau stop is decided from the residual series alone. The same solver log,
+    read at different moments (every 7 or every 13 iterations, as a loaded or an idle machine would
+    let the watch look), gives the same decision iteration and the same stop, set ahead of the
+    solver (endTime and writeInterval), never writeNow."""
+    from vcs.cfd.steady import STOP_LEAD, PlateauWatch
+
+    # a decade less per iteration for 150 iterations, then constant
+    residuals = [2e-5 * 10.0 ** max(150 - i, 0) for i in range(400)]
+    results = []
+    for every in (7, 13):
+        case = tmp_path / f"every{every}"
+        (case / "system").mkdir(parents=True)
+        control = case / "system" / "controlDict"
+        control.write_text("stopAt          endTime;\nendTime         1000;\nwriteInterval   1000;\n")
+        watch = PlateauWatch(case, {"plateau": {"iterations": 100, "max_residual": 1e-3, "early_stop": True}})
+        log = case / "log.simpleFoam"
+        for n in range(every, len(residuals) + 1, every):
+            _simple_log(log, residuals[:n])  # the log as the solver has written it so far
+            watch(log)
+            if watch.stopped_at is not None:
+                break
+        text = control.read_text()
+        assert "writeNow" not in text and watch.report()["deterministic"] is True
+        assert f"endTime         {watch.stopped_at};" in text and f"writeInterval   {watch.stopped_at};" in text
+        results.append((watch.decided_at, watch.stopped_at))
+    assert results[0] == results[1] and results[0][1] == results[0][0] + STOP_LEAD
+    # hand check: the first window of 100 whose first tenth's mean log10 residual is within
+    # log10(1.5) = 0.18 of its last tenth's holds only the ramp's last row (one decade up: +0.1;
+    # two rows: +0.3), rows 149-248 (0-based); the log numbers its rows from iteration 51
+    assert results[0][0] == 51 + 248
 
 
 def test_mser_finds_the_end_of_a_start_up_transient():

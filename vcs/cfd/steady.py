@@ -5,6 +5,7 @@ when the solution no longer changes). Also the convergence criterion in words.""
 from __future__ import annotations
 
 import os
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,19 +127,26 @@ class PlateauWatch:
     """Stops the main SIMPLE stage as soon as its residuals have levelled off (read from its log
     while it runs), instead of after ``max_iterations``: the plateau check then decides.
 
-    Levelled off: at least twice ``plateau.iterations`` iterations ran and neither initial residual
-    (p, U) fell by more than a factor :data:`EARLY_STOP_DECLINE` over the last ``plateau.iterations``
-    of them (geometric means of the window's first and last tenth). Below
+    Levelled off at iteration n: at least twice ``plateau.iterations`` (the window W) iterations ran
+    and neither initial residual (p, U) fell by more than a factor :data:`EARLY_STOP_DECLINE` over
+    iterations n - W + 1 .. n (geometric means of the window's first and last tenth). Below
     ``plateau.max_residual`` the plateau check then decides; above it (``stalled``: an unsteady
     flow, e.g. the jet of a coarctation, whose SIMPLE residuals hover at 1e-2) the main stage needs
     three windows of iterations before it is stopped, and the transient solve takes over at once
     instead of after ``max_iterations`` (AortaCFD patient1 at 0.59 mm: ~1 CPU s per iteration).
     A run still converging (residuals falling by a decade per few hundred iterations) is left
     alone, to meet residualControl. (With ``fallback: none`` a stalled run is stopped too: it
-    would end not converged at ``max_iterations`` all the same.) The stop: ``stopAt writeNow``
-    in system/controlDict, read by the solver at its next iteration (``runTimeModifiable``), which
-    writes that state and ends normally (the file's time stamp is moved past OpenFOAM's
-    ``fileModificationSkew`` so that the change is seen at once).
+    would end not converged at ``max_iterations`` all the same.)
+
+    Reproducible: the decision is a function of the residual series alone. Every iteration n the
+    log holds is judged on the rows up to n (:meth:`levelled`), whenever the log happens to be
+    read, so the first n* at which the residuals levelled off does not depend on when the watch
+    looked; the stop is then set ahead of the solver, at iteration n* + :data:`STOP_LEAD`
+    (``endTime`` and ``writeInterval`` in system/controlDict, read by the solver at its next
+    iteration: ``runTimeModifiable``), so the same inputs stop at the same iteration on a loaded or
+    an idle machine. Only when the solver is already past that iteration when the watch reads the
+    log (more than :data:`STOP_LEAD` iterations between two looks) it is stopped where it is
+    (``stopAt writeNow``) and the report says ``deterministic: false``.
     """
 
     def __init__(self, case_dir: Path, sol: dict[str, Any]) -> None:
@@ -148,51 +156,103 @@ class PlateauWatch:
         self.max_residual = float(pl.get("max_residual", 0.0))
         self.enabled = bool(pl.get("early_stop", False)) and self.window > 0
         self.stopped_at: int | None = None
+        self.decided_at: int | None = None
+        self.deterministic = True
         self.stalled = False
         self.decline: dict[str, float] = {}
+        self._judged = 0  # rows judged so far (each judged once, on the rows up to it)
+        self.poll_s = WATCH_POLL_S  # read by vcs.cfd.utilities._Runner
 
-    def __call__(self, log: Path) -> None:
-        """Read the log; once levelled off, ask the solver to write and stop (once)."""
-        if self.stopped_at is not None or not log.exists():
-            return
-        rows = [r for r in parse_solver_log(log)["rows"] if "p" in r and "U" in r]
+    def levelled(self, rows: list[dict[str, float]]) -> tuple[dict[str, float], bool] | None:
+        """Whether the residuals up to the last of ``rows`` levelled off: (the decline over the
+        window (log10 of the fall of p and U), above ``max_residual``), else None."""
         if len(rows) < 2 * self.window:
-            return
+            return None
         win = rows[-self.window :]
         above = not max(max(r["p"], r["U"]) for r in win) < self.max_residual
         if above and len(rows) < 3 * self.window:
-            return
+            return None
         k = max(self.window // 10, 1)
         decline = {
             f: float(np.mean(np.log10([r[f] for r in win[:k]])) - np.mean(np.log10([r[f] for r in win[-k:]])))
             for f in ("p", "U")
         }
-        if max(decline.values()) < np.log10(EARLY_STOP_DECLINE):
-            request_write_now(self.control)
-            self.stopped_at, self.decline = int(win[-1]["time"]), decline
-            self.stalled = above
+        return (decline, above) if max(decline.values()) < np.log10(EARLY_STOP_DECLINE) else None
+
+    def __call__(self, log: Path) -> None:
+        """Read the log; judge every iteration not judged yet; at the first that levelled off,
+        set the solver's stop :data:`STOP_LEAD` iterations on (once)."""
+        if self.decided_at is not None or not log.exists():
+            return
+        rows = [r for r in parse_solver_log(log)["rows"] if "p" in r and "U" in r]
+        for n in range(max(self._judged, 2 * self.window) + 1, len(rows) + 1):
+            found = self.levelled(rows[:n])
+            if found is None:
+                continue
+            self.decline, self.stalled = found
+            self.decided_at = int(rows[n - 1]["time"])
+            target = self.decided_at + STOP_LEAD
+            now = int(rows[-1]["time"])
+            if now < target - 1:  # the solver reads controlDict at its next iteration
+                request_end_at(self.control, target)
+                self.stopped_at = target
+            else:
+                request_write_now(self.control)
+                self.stopped_at, self.deterministic = now + 1, False
             progress.info(
-                "SIMPLE residuals levelled off at iteration %d (p %.3g, U %.3g; fell by x%.2f, x%.2f over %d)%s",
-                self.stopped_at,
-                win[-1]["p"],
-                win[-1]["U"],
-                10 ** decline["p"],
-                10 ** decline["U"],
+                "SIMPLE residuals levelled off at iteration %d (p %.3g, U %.3g; fell by x%.2f, x%.2f over %d)%s; "
+                "stopping it at iteration %d%s",
+                self.decided_at,
+                rows[n - 1]["p"],
+                rows[n - 1]["U"],
+                10 ** self.decline["p"],
+                10 ** self.decline["U"],
                 self.window,
-                f" above {self.max_residual:g}: not a steady solution, stopping it"
-                if self.stalled
-                else ": stopping it for the plateau check",
+                f" above {self.max_residual:g}: not a steady solution" if self.stalled else " (the plateau check next)",
+                self.stopped_at,
+                "" if self.deterministic else " (the solver was past the set stop: where it is, not reproducible)",
             )
+            return
+        self._judged = max(self._judged, len(rows))
 
     def report(self) -> dict[str, Any]:
-        """status.json ``plateau_early_stop``: where it stopped and the decline over the window."""
+        """status.json ``plateau_early_stop``: where it was decided and stopped, the decline over
+        the window, and whether the stop is reproducible (set ahead of the solver)."""
         return {
             "iteration": self.stopped_at,
+            "decided_at": self.decided_at,
+            "lead": STOP_LEAD,
+            "deterministic": self.deterministic,
             "window": self.window,
             "decline_factor": {f: float(10**v) for f, v in self.decline.items()},
             "max_decline_factor": EARLY_STOP_DECLINE,
             "above_max_residual": self.stalled,
         }
+
+
+STOP_LEAD = 50
+"""Iterations between the one at which :class:`PlateauWatch` finds the residuals levelled off and
+the one the solver is stopped at (set ahead of it, so that the stop does not depend on when the log
+was read: the watch reads it every :data:`WATCH_POLL_S` s, a few iterations of a real aorta, ~25
+of a CI-sized case)."""
+
+WATCH_POLL_S = 0.25
+"""How often (s) :class:`PlateauWatch` reads the solver's log."""
+
+
+def request_end_at(control: Path, iteration: int) -> None:
+    """Ask a running steady solver to end at ``iteration`` and write its state there: ``endTime``
+    and ``writeInterval`` (``writeControl timeStep``) of its system/controlDict set to it, read
+    again at its next step (``runTimeModifiable``; the time stamp moved past OpenFOAM's
+    ``fileModificationSkew``, as :func:`request_write_now`)."""
+    before = control.stat().st_mtime
+    text = control.read_text()
+    text = re.sub(r"^endTime\s+\S+;", f"endTime         {iteration};", text, count=1, flags=re.M)
+    text = re.sub(r"^writeInterval\s+\S+;", f"writeInterval   {iteration};", text, count=1, flags=re.M)
+    tmp = control.with_name(f".{control.name}.endAt")  # written whole, then renamed: never read half
+    tmp.write_text(text)
+    os.utime(tmp, (time.time(), max(time.time(), before + 60.0)))
+    os.replace(tmp, control)
 
 
 def request_write_now(control: Path) -> None:

@@ -109,8 +109,8 @@ class _Runner:
         """Run ``args`` (under mpirun with -parallel when ranks > 1); a timeout gives returncode -9,
         an executable that cannot be started 127. Never raises, except when the caller is interrupted
         (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the workflow scripts): then the
-        utility's whole process group is stopped first. ``watch(log file)`` is called every 2 s
-        while it runs."""
+        utility's whole process group is stopped first. ``watch(log file)`` is called every
+        ``watch.poll_s`` seconds (2 s when it has none) while it runs."""
         cmd = list(args)
         if ranks > 1:
             mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)]
@@ -128,7 +128,13 @@ class _Runner:
             try:
                 log_file = self.logs / f"log.{log}"
                 r = _run_group(
-                    cmd, self.case, self.env, fh, self.timeout, None if watch is None else lambda: watch(log_file)
+                    cmd,
+                    self.case,
+                    self.env,
+                    fh,
+                    self.timeout,
+                    None if watch is None else lambda: watch(log_file),
+                    poll_s=float(getattr(watch, "poll_s", 2.0)),
                 )
             except subprocess.TimeoutExpired:
                 r = subprocess.CompletedProcess(cmd, returncode=-9)
