@@ -871,8 +871,14 @@ def summary(fields: dict[str, Any]) -> dict[str, Any]:
     return {k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in out.items()}
 
 
+TIMING_KEYS = ("read_time_s", "interpolation_time_s", "sample_time_s")
+"""Wall-clock timings of a resampling: in ``fields.json``, never in ``fields.npz`` (whose bytes the
+same inputs must reproduce)."""
+
+
 def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path | str | None = None) -> None:
-    """Write ``fields.npz`` (all arrays), ``<npz stem>.json`` (counts and timings) and optionally a VTU.
+    """Write ``fields.npz`` (every array but the timings: the same inputs give the same bytes),
+    ``<npz stem>.json`` (counts and timings) and optionally a VTU.
 
     Parameters
     ----------
@@ -886,7 +892,7 @@ def write_fields(fields: dict[str, Any], npz_path: Path | str, *, vtu_path: Path
         the rho_n = 1 layer, zero inside; NaN at an ostium), for ParaView.
     """
     npz_path = Path(npz_path)
-    np.savez_compressed(npz_path, **fields)
+    np.savez_compressed(npz_path, **{k: v for k, v in fields.items() if k not in TIMING_KEYS})
     npz_path.with_suffix(".json").write_text(json.dumps(summary(fields), indent=1, sort_keys=True) + "\n")
     if vtu_path is not None:
         data = {k: fields[k] for k in ("U", "U_vcs", "p", "p_kinematic")}
