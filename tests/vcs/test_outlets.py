@@ -244,3 +244,46 @@ def test_rcr_bad_input(call):
     with pytest.raises(VCSInputError) as e:
         call()
     assert "\n" not in str(e.value)
+
+
+def test_parallel_rcr_periodic_against_the_integrated_network():
+    """The exact periodic solution of RCRs in parallel (one node pressure, fed by the inflow)
+    against the network integrated in time by scipy (LSODA) over 40 periods: with R_p > 0 the node
+    pressure is algebraic, P = (Q_in + sum P_c,k / R_p,k) / sum 1/R_p,k, each capacitor
+    C_k dP_c,k/dt = (P - P_c,k) / R_p,k - (P_c,k - P_d) / R_d,k."""
+    from scipy.integrate import solve_ivp
+
+    from vcs.cfd.outlets import parallel_rcr_periodic
+
+    T = 0.8
+    rcrs = [
+        {"r_p": 1.0e7, "c": 1.5e-9, "r_d": 9.0e7, "p_distal_pa": 700.0},
+        {"r_p": 4.0e7, "c": 0.4e-9, "r_d": 3.6e8, "p_distal_pa": 700.0},
+        {"r_p": 2.0e8, "c": 0.1e-9, "r_d": 1.8e9, "p_distal_pa": 700.0},
+    ]
+    coeffs = np.array([5e-5, -2j * 3e-5, 1.5e-5 + 1e-5j])  # mean, sin, a second harmonic
+
+    def q_in(t):
+        n = np.arange(coeffs.size)
+        return float(np.real(np.exp(2j * np.pi * n * t / T) @ coeffs))
+
+    rp = np.array([k["r_p"] for k in rcrs])
+    rd = np.array([k["r_d"] for k in rcrs])
+    c = np.array([k["c"] for k in rcrs])
+
+    def node(t, pc):
+        return (q_in(t) + (pc / rp).sum()) / (1.0 / rp).sum()
+
+    def rhs(t, pc):
+        p = node(t, pc)
+        return ((p - pc) / rp - (pc - 700.0) / rd) / c
+
+    sol = solve_ivp(rhs, (0.0, 40 * T), np.full(3, 700.0), method="LSODA", rtol=1e-10, atol=1e-6, dense_output=True)
+    t = np.linspace(39 * T, 40 * T, 101)
+    pc = sol.sol(t)
+    p_num = np.array([node(ti, pc[:, i]) for i, ti in enumerate(t)])
+    q_num = (p_num - pc) / rp[:, None]
+    p_ref, q_ref = parallel_rcr_periodic(t, T, coeffs, rcrs)
+    assert np.abs(p_num - p_ref).max() < 1e-6 * np.abs(p_ref).max()
+    assert np.abs(q_num - q_ref).max() < 1e-6 * np.abs(q_ref).max()
+    assert np.allclose(q_ref.sum(axis=0), [q_in(ti) for ti in t], rtol=0, atol=1e-12)

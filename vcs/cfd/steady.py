@@ -107,12 +107,13 @@ def _run_simple(
         if r.returncode != 0:
             raise Stop(_solver_failure(logs[-1], "start-up"), "simpleFoam.startup")
     render_files(case_dir, state, STAGE_FILES, end_time=int(sol["max_iterations"]))
-    watch = PlateauWatch(case_dir, sol)
+    watch = PlateauWatch(case_dir, sol, end_iteration=int(sol["max_iterations"]))
     r = run(["simpleFoam"], "simpleFoam", ranks, watch=watch if watch.enabled else None)
     logs.append(case_dir / "logs" / "log.simpleFoam")
     main = parse_solver_log(logs[-1])
     status["solver_log"] = _log_summary(main, logs[-1])
     if watch.stopped_at is not None:
+        watch.ended([r for r in main["rows"] if "p" in r])
         status["plateau_early_stop"] = watch.report()
     if r.returncode == 0:
         return main, None
@@ -149,8 +150,9 @@ class PlateauWatch:
     (``stopAt writeNow``) and the report says ``deterministic: false``.
     """
 
-    def __init__(self, case_dir: Path, sol: dict[str, Any]) -> None:
+    def __init__(self, case_dir: Path, sol: dict[str, Any], *, end_iteration: int | None = None) -> None:
         pl = sol.get("plateau") or {}
+        self.end_iteration = end_iteration  # the stage's own endTime: a stop is never set past it
         self.control = case_dir / "system" / "controlDict"
         self.window = int(pl.get("iterations", 0))
         self.max_residual = float(pl.get("max_residual", 0.0))
@@ -185,7 +187,7 @@ class PlateauWatch:
         if self.decided_at is not None or not log.exists():
             return
         rows = [r for r in parse_solver_log(log)["rows"] if "p" in r and "U" in r]
-        for n in range(max(self._judged, 2 * self.window) + 1, len(rows) + 1):
+        for n in range(max(self._judged + 1, 2 * self.window), len(rows) + 1):
             found = self.levelled(rows[:n])
             if found is None:
                 continue
@@ -193,7 +195,9 @@ class PlateauWatch:
             self.decided_at = int(rows[n - 1]["time"])
             target = self.decided_at + STOP_LEAD
             now = int(rows[-1]["time"])
-            if now < target - 1:  # the solver reads controlDict at its next iteration
+            if self.end_iteration is not None and target >= self.end_iteration:
+                self.stopped_at = self.end_iteration  # it ends there anyway: nothing to change
+            elif now < target - 1:  # the solver reads controlDict at its next iteration
                 request_end_at(self.control, target)
                 self.stopped_at = target
             else:
@@ -214,6 +218,12 @@ class PlateauWatch:
             )
             return
         self._judged = max(self._judged, len(rows))
+
+    def ended(self, rows: list[dict[str, float]]) -> None:
+        """After the run: the iteration it really ended at (the log's last), when that is not the
+        set stop (residualControl met, or the solver ended, before it)."""
+        if rows and self.stopped_at is not None and int(rows[-1]["time"]) != self.stopped_at:
+            self.stopped_at = int(rows[-1]["time"])
 
     def report(self) -> dict[str, Any]:
         """status.json ``plateau_early_stop``: where it was decided and stopped, the decline over

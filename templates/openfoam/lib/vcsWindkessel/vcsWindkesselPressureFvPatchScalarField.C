@@ -26,7 +26,8 @@ vcsWindkesselPressureFvPatchScalarField
     timeIndex_(-1),
     phiName_("phi"),
     rAUName_(word::null),
-    implicit_(false)
+    implicit_(false),
+    warnedExplicit_(false)
 {
     refValue() = Zero;
     refGrad() = Zero;
@@ -52,7 +53,8 @@ vcsWindkesselPressureFvPatchScalarField
     timeIndex_(-1),
     phiName_(dict.lookupOrDefault<word>("phi", "phi")),
     rAUName_(dict.lookupOrDefault<word>("rAU", word::null)),
-    implicit_(false)
+    implicit_(false),
+    warnedExplicit_(false)
 {
     if (Rp_ < 0 || C_ < 0 || Rd_ <= 0)
     {
@@ -93,7 +95,8 @@ vcsWindkesselPressureFvPatchScalarField
     timeIndex_(ptf.timeIndex_),
     phiName_(ptf.phiName_),
     rAUName_(ptf.rAUName_),
-    implicit_(ptf.implicit_)
+    implicit_(ptf.implicit_),
+    warnedExplicit_(ptf.warnedExplicit_)
 {}
 
 
@@ -114,7 +117,8 @@ vcsWindkesselPressureFvPatchScalarField
     timeIndex_(ptf.timeIndex_),
     phiName_(ptf.phiName_),
     rAUName_(ptf.rAUName_),
-    implicit_(ptf.implicit_)
+    implicit_(ptf.implicit_),
+    warnedExplicit_(ptf.warnedExplicit_)
 {}
 #endif
 
@@ -136,7 +140,8 @@ vcsWindkesselPressureFvPatchScalarField
     timeIndex_(ptf.timeIndex_),
     phiName_(ptf.phiName_),
     rAUName_(ptf.rAUName_),
-    implicit_(ptf.implicit_)
+    implicit_(ptf.implicit_),
+    warnedExplicit_(ptf.warnedExplicit_)
 {}
 
 
@@ -225,11 +230,20 @@ void Foam::vcsWindkesselPressureFvPatchScalarField::updateCoeffs()
     }
     else if (!implicit_)
     {
+        if (!warnedExplicit_)
+        {
+            WarningInFunction
+                << "patch " << this->patch().name() << ": no phiHbyA/"
+                << rAUName << " registered (not in a pressure solve of "
+                << "simpleFoam/pimpleFoam?): the Windkessel is coupled "
+                << "explicitly (p = Z Q + P_0 from the last flux), which is "
+                << "unstable with several outlets" << endl;
+            warnedExplicit_ = true;
+        }
         if (debug)
         {
             Info<< "vcsWindkesselPressure " << this->patch().name()
-                << ": no phiHbyA/" << rAUName << " among "
-                << this->db().sortedToc() << endl;
+                << ": registered objects " << this->db().sortedToc() << endl;
         }
         // not within a pressure solve: explicit, from the current flux
         const scalar Q = gSum(phi.boundaryField()[patchi]);
