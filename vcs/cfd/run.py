@@ -151,6 +151,8 @@ def _new_status(case_dir: Path, state: dict[str, Any], version: str | None) -> d
         "flavour": state["flavour"],
         "openfoam_version": version,
         "ranks": cfd["ranks"],
+        # MPI changes the order of sums: results agree to round-off, not bit for bit, across rank counts
+        "decomposition": {"method": cfd["decomposition"]["method"], "n": state.get("decomposition_n")},
         "converged": False,
         "criterion": _criterion_text(cfd["solver"]),
         "iterations": 0,
