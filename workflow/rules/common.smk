@@ -302,7 +302,7 @@ def load_patients(sheet):
                 _check_file(record[column], sheet, n, pid, column)
         given = [c for c in PATIENT_RCR_COLUMNS if c in record]
         kind = record.get("outlets") or config["cfd"].get("outlets", {}).get("type", "free")
-        if given and kind != "rcr":
+        if given and kind not in ("rcr", "rcr_fixed_share"):
             fail(
                 f"patients sheet '{sheet}' line {n} (id {pid}): {given[0]} is given but this patient's outlets "
                 f"are {kind}; set its outlets column to rcr (or leave {given[0]} empty)"
