@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -430,10 +431,7 @@ def load_waveform(path: str | Path) -> Waveform:
     names: tuple[str, str] = HEADER
     lines: list[int] = []
     values: list[tuple[float, float]] = []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
+    for number, line in _content_lines(text):
         fields = [f.strip() for f in line.split(",")]
         if header_line is None:
             found = _header_units(fields)
@@ -497,10 +495,7 @@ def load_flow_file(path: str | Path) -> Waveform:
     where = f"waveform {path}"
     lines: list[int] = []
     values: list[tuple[float, float]] = []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
+    for number, line in _content_lines(text):
         fields = line.replace(",", " ").split()
         if len(fields) != 2:
             raise VCSInputError(
@@ -520,6 +515,14 @@ def load_flow_file(path: str | Path) -> Waveform:
             "(inflow is negative in a .flow file); negate the flows of the file"
         )
     return w
+
+
+def _content_lines(text: str) -> Iterator[tuple[int, str]]:
+    """(1-based line number, stripped line) of every line that is neither blank nor a ``#`` comment."""
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if line and not line.startswith("#"):
+            yield number, line
 
 
 def _read(path: Path) -> str:
